@@ -240,3 +240,82 @@ def ground_reaction(P, q1, q2, q1d, q2d, q1dd, q2dd):
 def leg_inertia(P):
     """Leg inertia about its centre of mass [kg m^2]."""
     return P[PIC]
+
+
+# ---------------------------------------------------------------------------- momenta
+@_jit
+def centre_of_mass_velocity(P, q1, q2, q1d, q2d):
+    """Velocity ``(vx, vy)`` [m/s] of the centre of mass (stance foot fixed), inertial masses."""
+    l, lc, m, mh = P[PL], P[PLC], P[PM], P[PMH]  # noqa: E741
+    s = q2 - q1
+    sd = q2d - q1d
+    a = m * lc + mh * l + m * l
+    mt = 2.0 * m + mh
+    vx = (a * np.cos(q2) * q2d - m * (l - lc) * np.cos(s) * sd) / mt
+    vy = (-a * np.sin(q2) * q2d + m * (l - lc) * np.sin(s) * sd) / mt
+    return vx, vy
+
+
+@_jit
+def _body_momentum(m, ic, cx, cy, vx, vy, w, ox, oy):
+    """Angular momentum (counter-clockwise positive) of a rigid body about ``(ox, oy)``."""
+    return m * ((cx - ox) * vy - (cy - oy) * vx) + ic * w
+
+
+@_jit
+def leg_momenta(P, q1, q2, q1d, q2d, ox, oy):
+    """Angular momenta [kg m^2/s] about the point ``(ox, oy)`` (relative to the stance foot)
+    of ``(stance leg, hip mass, swing leg)``, built from the kinematics (counter-clockwise
+    positive; within a step the walker rotates clockwise)."""
+    l, lc, m, mh, ic = P[PL], P[PLC], P[PM], P[PMH], P[PIC]  # noqa: E741
+    s2, c2 = np.sin(q2), np.cos(q2)
+    s = q2 - q1
+    sd = q2d - q1d
+    ss, cs = np.sin(s), np.cos(s)
+    hx, hy = l * s2, l * c2
+    hvx, hvy = l * c2 * q2d, -l * s2 * q2d
+    stance = _body_momentum(m, ic, lc * s2, lc * c2, lc * c2 * q2d, -lc * s2 * q2d, -q2d, ox, oy)
+    hip = _body_momentum(mh, 0.0, hx, hy, hvx, hvy, 0.0, ox, oy)
+    d = l - lc
+    swing = _body_momentum(
+        m, ic, hx - d * ss, hy - d * cs, hvx - d * cs * sd, hvy + d * ss * sd, -sd, ox, oy
+    )
+    return stance, hip, swing
+
+
+@_jit
+def angular_momentum(P, q1, q2, q1d, q2d, ox, oy):
+    """Angular momentum of the whole robot [kg m^2/s] about ``(ox, oy)`` relative to the
+    stance foot (counter-clockwise positive)."""
+    a, b, c = leg_momenta(P, q1, q2, q1d, q2d, ox, oy)
+    return a + b + c
+
+
+@_jit
+def impact_momentum(P, q1, q2, q1d, q2d):
+    """Impact map by conservation of angular momentum (independent of the closed form).
+
+    A plastic impact without slip at the swing foot: the angular momentum of the whole robot
+    about the new stance foot, and that of the trailing leg (the old stance leg, whose foot
+    leaves the ground without impulse) about the hip, are conserved. Both are built from the
+    kinematics of :func:`leg_momenta` and solved for the post-impact velocities.
+
+    Returns ``(q1+, q2+, q1d+, q2d+)`` like :func:`impact`.
+    """
+    l = P[PL]  # noqa: E741
+    s = q2 - q1
+    fx, fy = l * np.sin(q2) - l * np.sin(s), l * np.cos(q2) - l * np.cos(s)
+    st, hp, sw = leg_momenta(P, q1, q2, q1d, q2d, fx, fy)
+    b1 = st + hp + sw
+    hx, hy = l * np.sin(q2), l * np.cos(q2)
+    b2 = leg_momenta(P, q1, q2, q1d, q2d, hx, hy)[0]
+    # after the impact: new stance foot at the origin, new coordinates, unit velocities
+    p1, p2 = -q1, q2 - q1
+    z = 0.0 * q1
+    a11 = angular_momentum(P, p1, p2, z + 1.0, z, z, z)
+    a12 = angular_momentum(P, p1, p2, z, z + 1.0, z, z)
+    hx2, hy2 = l * np.sin(p2), l * np.cos(p2)
+    a21 = leg_momenta(P, p1, p2, z + 1.0, z, hx2, hy2)[2]
+    a22 = leg_momenta(P, p1, p2, z, z + 1.0, hx2, hy2)[2]
+    det = a11 * a22 - a12 * a21
+    return p1, p2, (a22 * b1 - a12 * b2) / det, (a11 * b2 - a21 * b1) / det

@@ -1,0 +1,110 @@
+"""Passive walking down a slope: the walker starts near its limit cycle and (if the cycle is
+stable) converges to it, with no motor at all.
+
+Finds the passive limit cycle for the robot and slope (Newton on the step-to-step map), starts
+the walker from a seeded random perturbation of it, and prints one row per step: time, step
+length, stance-leg rate just after the impact, and the distance to the cycle.
+"""
+
+from __future__ import annotations
+
+import argparse
+import math
+
+import numpy as np
+
+# starting guess for Newton: the classic walker's cycle on a 0.0525 rad slope (q2, q1d, q2d)
+_GUESS = (-0.218775, 1.092867 - 0.376135, 1.092867)
+
+
+def configure(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("--steps", type=int, default=20, help="number of steps to walk")
+    parser.add_argument(
+        "--slope", type=float, default=0.0525, help="downhill slope angle [rad] (default 0.0525)"
+    )
+    parser.add_argument("--robot", default="classic", help="robot preset (default classic)")
+    parser.add_argument("--seed", type=int, default=0, help="seed of the start perturbation")
+    parser.add_argument(
+        "--perturb",
+        type=float,
+        default=0.02,
+        help="size of the start perturbation (rad, rad/s; default 0.02)",
+    )
+
+
+def run(args: argparse.Namespace) -> int:
+    from rich.console import Console
+    from rich.table import Table
+
+    from envs import RobotParams, SimConfig, Terrain, simulate
+    from envs.simulator import passive_limit_cycle, slope_section_state
+
+    console = Console()
+    if args.steps < 1:
+        raise SystemExit("--steps must be >= 1")
+    if not (math.isfinite(args.slope) and 0 <= args.slope < 0.5):
+        raise SystemExit("--slope must be in [0, 0.5) rad")
+    if not (math.isfinite(args.perturb) and args.perturb >= 0):
+        raise SystemExit("--perturb must be >= 0")
+    params = RobotParams.from_preset(args.robot)
+    gamma = -args.slope
+    try:
+        cycle = passive_limit_cycle(params, gamma, _GUESS)
+    except RuntimeError as exc:
+        console.print(
+            f"[red]no passive limit cycle found for {args.robot} on {args.slope} rad: {exc}"
+        )
+        return 1
+    z_star = cycle.state[[1, 2, 3]]
+    moduli = np.sort(np.abs(cycle.eigenvalues))[::-1]
+    console.print(
+        f"[bold]{args.robot}[/] walker, slope {args.slope} rad: limit cycle period "
+        f"{cycle.period:.6f} s, step length {cycle.step_length:.6f} m, post-impact "
+        f"q2 = {z_star[0]:.6f} rad, q2dot = {z_star[2]:.6f} rad/s; Poincare eigenvalue moduli "
+        + ", ".join(f"{m:.3f}" for m in moduli)
+        + (" (stable)" if moduli[0] < 1 else " (unstable)")
+    )
+    rng = np.random.default_rng(args.seed)
+    z0 = z_star + args.perturb * rng.uniform(-1.0, 1.0, 3) * np.array([0.5, 1.0, 1.0])
+    q0, qd0 = slope_section_state(z0, gamma)
+    duration = (args.steps + 0.5) * cycle.period * 1.5
+    res = simulate(
+        params,
+        Terrain.slope(gamma),
+        q0,
+        qd0,
+        duration,
+        config=SimConfig(),
+        stop_at_impacts=args.steps,
+    )
+    post = np.nonzero(np.diff(res.t) == 0)[0] + 1
+    table = Table(title="passive steps")
+    for col in ("step", "time [s]", "step length [m]", "q2dot+ [rad/s]", "distance to cycle"):
+        table.add_column(col, justify="right")
+    table.add_row(
+        "start", f"{res.t[0]:.4f}", "", f"{qd0[1]:.6f}", f"{np.linalg.norm(z0 - z_star):.2e}"
+    )
+    foot = np.zeros(2)
+    dist = np.linalg.norm(z0 - z_star)
+    for i, k in enumerate(post):
+        z = np.array([res.q[k, 1], res.qd[k, 0], res.qd[k, 1]])
+        dist = np.linalg.norm(z - z_star)
+        length = float(np.hypot(*(res.footholds[i] - foot)))
+        foot = res.footholds[i]
+        table.add_row(
+            str(i + 1), f"{res.impact_times[i]:.4f}", f"{length:.6f}", f"{z[2]:.6f}", f"{dist:.2e}"
+        )
+    console.print(table)
+    n = len(post)
+    periods = np.diff(np.r_[0.0, res.impact_times])
+    travelled = res.footholds[-1, 0] if n else 0.0
+    summary = (
+        f"{n} steps in {res.t[-1]:.3f} s, {travelled:.3f} m down the slope; "
+        f"last period {periods[-1] if n else float('nan'):.6f} s; distance to the cycle "
+        f"{np.linalg.norm(z0 - z_star):.2e} -> {dist:.2e}"
+    )
+    if res.failure is not None:
+        console.print(f"[red]{summary}; FAILED: {res.failure} at t = {res.failure_time:.4f} s")
+        return 1
+    console.print(summary + ("; converged to the limit cycle" if dist < 1e-3 else ""))
+    return 0
