@@ -197,13 +197,20 @@ class Terrain:
             raise ValueError(f"terrain field 'width_range' = {width_range!r}; allowed: low > 0 m")
         hr = _range("height_range", height_range)
         rng = np.random.default_rng(_seed(seed))
-        edges, rises = [], []
-        x = st
-        while x < st + ln:
-            edges.append(float(x))
-            rises.append(float(rng.uniform(*hr)))
-            x += float(rng.uniform(*wr))
-        xs, ys = _steps_to_points(edges, rises, 0.0)
+        # all draws at once (a course is built at every reset of the rough envs)
+        n = int(math.ceil(ln / wr[0])) + 1
+        widths = rng.uniform(wr[0], wr[1], n)
+        rises = rng.uniform(hr[0], hr[1], n)
+        edges = st + np.concatenate(([0.0], np.cumsum(widths[:-1])))
+        keep = edges < st + ln
+        edges, rises = edges[keep], rises[keep]
+        if edges.size == 0:
+            xs, ys = [st - 1.0, st + 1.0], [0.0, 0.0]
+        else:
+            after = np.cumsum(rises)
+            before = after - rises
+            xs = np.concatenate(([edges[0] - 1.0], np.repeat(edges, 2), [edges[-1] + 1.0]))
+            ys = np.concatenate(([0.0], np.column_stack((before, after)).ravel(), [after[-1]]))
         spec = {
             "kind": "blocks",
             "seed": int(seed),
@@ -235,15 +242,14 @@ class Terrain:
         if max(abs(kr[0]), abs(kr[1])) >= 1.0:
             raise ValueError(f"terrain field 'slope_range' = {slope_range!r}; allowed: |slope| < 1")
         rng = np.random.default_rng(_seed(seed))
-        xs, ys = [st - 1.0, st], [0.0, 0.0]
-        x, y = st, 0.0
-        while x < st + ln:
-            dx = float(rng.uniform(*sr))
-            x, y = x + dx, y + dx * float(rng.uniform(*kr))
-            xs.append(x)
-            ys.append(y)
-        xs.append(x + 1.0)
-        ys.append(y)
+        n = int(math.ceil(ln / sr[0])) + 1
+        dx = rng.uniform(sr[0], sr[1], n)
+        k = rng.uniform(kr[0], kr[1], n)
+        x = st + np.cumsum(dx)
+        m = int(np.searchsorted(x, st + ln, side="left")) + 1  # first vertex at or past the end
+        x, y = x[:m], np.cumsum(dx[:m] * k[:m])
+        xs = np.concatenate(([st - 1.0, st], x, [x[-1] + 1.0]))
+        ys = np.concatenate(([0.0, 0.0], y, [y[-1]]))
         spec = {
             "kind": "piecewise",
             "seed": int(seed),

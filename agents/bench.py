@@ -1,0 +1,319 @@
+"""Speed of the simulator (and, as they are added, of the environments and controllers).
+
+Each benchmark section is a function ``section(args) -> list of (quantity, value, unit)`` in
+:data:`SECTIONS`; ``roughwalk bench`` runs them in order and prints one table. Compilation and
+warm-up are excluded from the timings.
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import time
+from collections.abc import Callable
+
+import numpy as np
+
+Row = tuple[str, str, str]
+Section = Callable[[argparse.Namespace], list[Row]]
+
+# the classic walker's passive cycle down a 0.0525 rad slope (post-impact state)
+_SLOPE = -0.0525
+_Q0 = (-0.218775 - 0.323775, -0.218775)
+_QD0 = (1.092867 - 0.376135, 1.092867)
+DRAKE_STEPS_PER_S = 41_000  # Drake's C++ compass gait, 10 ms steps per second (reference)
+
+
+def _timed(fn: Callable[[], None], min_time: float) -> float:
+    """Call ``fn`` repeatedly for at least ``min_time`` seconds (and 3 times); return the
+    fastest call [s] (the least disturbed by other load on the machine)."""
+    best, calls, start = float("inf"), 0, time.perf_counter()
+    while calls < 3 or time.perf_counter() - start < min_time:
+        t0 = time.perf_counter()
+        fn()
+        best = min(best, time.perf_counter() - t0)
+        calls += 1
+    return best
+
+
+def simulator_section(args: argparse.Namespace) -> list[Row]:
+    """Single walker (one Python call per 10 ms step) and a batch of walkers (multi-threaded
+    and single-threaded kernels), the classic walker walking passively down a slope. Timings
+    are the fastest of repeated runs."""
+    import numba
+
+    from envs import RobotParams, Simulator, Terrain
+
+    params, terrain = RobotParams.from_preset("classic"), Terrain.slope(_SLOPE)
+    t_min = 0.3 if args.quick else 2.0
+    rows: list[Row] = []
+
+    sim = Simulator(params, terrain, 1, dt=0.01)
+    sim.reset(_Q0, _QD0)
+    sim.step(0.0)  # compile / load from cache
+    walked = 1.0 if args.quick else 2.0
+    n = round(walked / sim.dt)
+
+    def walk() -> None:
+        sim.reset(_Q0, _QD0)
+        for _ in range(n):
+            sim.step(0.0)
+
+    per_walk = _timed(walk, t_min)
+    if sim.failure() is not None:
+        raise RuntimeError(f"benchmark walker failed: {sim.failure()}")
+    rows.append(("1 walker: simulated s per wall s", f"{walked / per_walk:,.0f}", "x"))
+    rows.append(("1 walker: one 10 ms step() call", f"{per_walk / n * 1e6:.2f}", "us"))
+    rows.append(("1 walker: steps per second", f"{n / per_walk:,.0f}", "1/s"))
+
+    nb = args.walkers
+    rng = np.random.default_rng(0)
+    q0 = np.asarray(_Q0) + rng.uniform(-1e-3, 1e-3, (nb, 2))
+    torque = np.zeros(nb)
+    chunk = 10
+    for parallel in (True, False):
+        batch = Simulator(params, terrain, nb, dt=0.01, parallel=parallel)
+        batch.reset(q0, np.broadcast_to(_QD0, (nb, 2)))
+        batch.step(torque)
+
+        def steps(batch: Simulator = batch) -> None:
+            for _ in range(chunk):
+                batch.step(torque)
+
+        per_step = _timed(steps, t_min) / chunk
+        if batch.status.any():
+            raise RuntimeError("benchmark batch: some walkers failed")
+        how = f"{numba.get_num_threads()} thr" if parallel else "1 thr"
+        rows.append((f"{nb} walkers, {how}: walker-steps/s", f"{nb / per_step:,.0f}", "1/s"))
+        rows.append(
+            (
+                f"{nb} walkers, {how}: simulated s/wall s",
+                f"{nb * 0.01 / per_step:,.0f}",
+                "x",
+            )
+        )
+    rows.append(("reference: Drake C++ compass gait", f"{DRAKE_STEPS_PER_S:,}", "steps/s"))
+    rows.append(("machine: os.cpu_count()", str(os.cpu_count()), "cores"))
+    rows.append(("machine: numba threads", str(numba.get_num_threads()), "threads"))
+    rows.append(("machine: numba threading layer", numba.threading_layer(), ""))
+    return rows
+
+
+def env_section(args: argparse.Namespace) -> list[Row]:
+    """Gymnasium environments: one env through ``gym.make`` (its wrappers included) and the
+    native vector env at 1, 64 and ``--walkers`` envs; BipedalWalker-v3 for scale if Box2D is
+    installed. Passive walking down the slope (no resets), and random actions on rough terrain
+    (falls and resets included)."""
+    import gymnasium as gym
+
+    import envs  # noqa: F401  (registers the ids)
+
+    t_min = 0.3 if args.quick else 2.0
+    rows: list[Row] = []
+    rng = np.random.default_rng(0)
+
+    def timed(fn: Callable[[], None], mean: bool) -> float:
+        # passive walking: the fastest call (least disturbed by other load); with resets: the
+        # mean over the whole run, so that the resets are counted at their real frequency
+        if not mean:
+            return _timed(fn, t_min)
+        fn()
+        calls, start = 0, time.perf_counter()
+        while calls < 3 or time.perf_counter() - start < t_min:
+            fn()
+            calls += 1
+        return (time.perf_counter() - start) / calls
+
+    def single(env_id: str, random_actions: bool) -> float:
+        env = gym.make(env_id)
+        env.reset(seed=0)
+        acts = (
+            rng.uniform(-1, 1, (4096, 1)).astype(np.float32)
+            if random_actions
+            else np.zeros((4096, 1), np.float32)
+        )
+        state = {"k": 0}
+
+        def chunk() -> None:
+            for _ in range(1000):
+                k = state["k"] = (state["k"] + 1) % 4096
+                _, _, term, trunc, _ = env.step(acts[k])
+                if term or trunc:
+                    env.reset()
+
+        return 1000 / timed(chunk, random_actions)
+
+    def vector(env_id: str, n: int, random_actions: bool) -> float:
+        venv = gym.make_vec(env_id, n, vectorization_mode="vector_entry_point")
+        venv.reset(seed=0)
+        acts = (
+            rng.uniform(-1, 1, (8, n, 1)).astype(np.float32)
+            if random_actions
+            else np.zeros((8, n, 1), np.float32)
+        )
+        state = {"k": 0}
+        reps = max(1, 4096 // n)
+
+        def steps() -> None:
+            for _ in range(reps):
+                state["k"] = (state["k"] + 1) % 8
+                venv.step(acts[state["k"]])
+
+        steps()
+        return n * reps / timed(steps, random_actions)
+
+    slope, rough = "roughwalk/CompassGaitSlope-v0", "roughwalk/CompassGaitRough-v0"
+    rows.append(
+        ("gym.make Slope (passive, 10 ms): steps per second", f"{single(slope, False):,.0f}", "1/s")
+    )
+    rows.append(
+        (
+            "gym.make Rough (random, 5 ms, resets; mean): steps per second",
+            f"{single(rough, True):,.0f}",
+            "1/s",
+        )
+    )
+    for n in sorted({1, 64, args.walkers}):
+        rate = vector(slope, n, False)
+        rows.append((f"vector Slope x{n} (passive): env-steps per second", f"{rate:,.0f}", "1/s"))
+    # the same batch stepped by the bare simulator, right after: the environment's share
+    venv = gym.make_vec(slope, args.walkers, vectorization_mode="vector_entry_point")
+    venv.reset(seed=0)
+    sim = venv.unwrapped._batch.sim
+    torque = np.zeros(args.walkers)
+    reps = max(1, 4096 // args.walkers)
+
+    def sim_steps() -> None:
+        for _ in range(reps):
+            sim.step(torque)
+
+    sim_steps()
+    sim_rate = args.walkers * reps / _timed(sim_steps, t_min)
+    env_rate = vector(slope, args.walkers, False)
+    rows.append(
+        (
+            f"vector Slope x{args.walkers} / bare simulator (same run)",
+            f"{env_rate:,.0f} / {sim_rate:,.0f}",
+            "1/s",
+        )
+    )
+    rate = vector(rough, args.walkers, True)
+    rows.append(
+        (
+            f"vector Rough x{args.walkers} (random, autoresets; mean): env-steps/s",
+            f"{rate:,.0f}",
+            "1/s",
+        )
+    )
+    try:
+        bw = gym.make("BipedalWalker-v3")
+    except Exception:  # noqa: BLE001 - Box2D is optional
+        rows.append(("BipedalWalker-v3 (gym.make): steps per second", "n/a (no Box2D)", ""))
+    else:
+        bw.reset(seed=0)
+
+        def bw_chunk() -> None:
+            for _ in range(200):
+                _, _, term, trunc, _ = bw.step(bw.action_space.sample())
+                if term or trunc:
+                    bw.reset()
+
+        rate = 200 / _timed(bw_chunk, t_min)
+        rows.append(("BipedalWalker-v3 (gym.make): steps per second", f"{rate:,.0f}", "1/s"))
+    return rows
+
+
+#: benchmark sections, run in order: (title, function)
+
+
+def controller_section(args: argparse.Namespace) -> list[Row]:
+    """Transverse controller of the paper robot on flat ground: one footstep's jump-Riccati
+    solve at h = 3 (the paper: about 0.5 s in MATLAB), the linearisation plus solve, the
+    planner's replanning call, and one control tick (observer update plus feedback law).
+    Medians of repeated calls."""
+    from controllers.controller import (
+        ControllerConfig,
+        TransverseController,
+        feedback_law,
+        horizon_gains,
+        step_models,
+    )
+    from controllers.observer import HighGainObserver, observer_update
+
+    reps = 20 if args.quick else 200
+    ctrl = TransverseController("paper", "flat", ControllerConfig(horizon=3, replan=False))
+    gait = ctrl.planner.periodic_gait()
+    ctrl.reset(gait.q, gait.qd)
+    steps = ctrl.plan.steps[:4]
+    ric, full = [], []
+    for _ in range(reps):
+        t0 = time.perf_counter()
+        sol = horizon_gains(step_models(ctrl.P, steps, ctrl.terrain), ctrl.config)
+        full.append(time.perf_counter() - t0)
+        ric.append(sol.riccati_time)
+    plan_t = []
+    prev = None
+    for _ in range(max(3, reps // 20)):
+        t0 = time.perf_counter()
+        prev = ctrl.planner.plan(ctrl.terrain, (gait.q, gait.qd), (0.0, 0.0), 4, prev)
+        plan_t.append(time.perf_counter() - t0)
+    obs = HighGainObserver(ctrl.robot, 0.005, 0.02)
+    obs.reset(gait.q, gait.qd)
+    x, P, n = obs.x, ctrl.P, 20000 if not args.quick else 2000
+    tab, pc, Fv, Fd, K = ctrl._tab, ctrl._pc, ctrl._Fv, ctrl._Fd, ctrl._K
+    q1, q2 = float(gait.q[0]), float(gait.q[1])
+    observer_update(P, x, q1, q2, q1, q2, 0.0, 0.005, 0.02, obs.nsub)
+    feedback_law(P, x, tab, pc, Fv, Fd, K)
+    x[:] = (*gait.q, *gait.qd)
+    t0 = time.perf_counter()
+    for _ in range(n):
+        observer_update(P, x, q1, q2, q1, q2, 0.0, 0.005, 0.02, obs.nsub)
+        feedback_law(P, x, tab, pc, Fv, Fd, K)
+    tick = (time.perf_counter() - t0) / n
+    return [
+        ("Riccati solve, one footstep, h = 3", f"{np.median(ric) * 1e3:.3f}", "ms"),
+        ("linearisation + Riccati, one footstep", f"{np.median(full) * 1e3:.2f}", "ms"),
+        ("replanning (planner, 4 steps, flat)", f"{np.median(plan_t) * 1e3:.1f}", "ms"),
+        ("control tick (observer + feedback law)", f"{tick * 1e6:.2f}", "us"),
+    ]
+
+
+SECTIONS: list[tuple[str, Section]] = [
+    ("simulator", simulator_section),
+    ("environment", env_section),
+    ("controller", controller_section),
+]
+
+
+def configure(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("--quick", action="store_true", help="short timings (a few seconds)")
+    parser.add_argument(
+        "--walkers", type=int, default=1024, help="batch size of the batched benchmarks"
+    )
+    parser.add_argument(
+        "--only",
+        action="append",
+        choices=[name for name, _ in SECTIONS],
+        help="run only this section (repeatable)",
+    )
+
+
+def run(args: argparse.Namespace) -> int:
+    from rich.console import Console
+    from rich.table import Table
+
+    if args.walkers < 1:
+        raise SystemExit("--walkers must be >= 1")
+    table = Table(title="roughwalk bench" + (" (quick)" if args.quick else ""))
+    table.add_column("section")
+    table.add_column("quantity")
+    table.add_column("value", justify="right")
+    table.add_column("unit")
+    for name, section in SECTIONS:
+        if args.only and name not in args.only:
+            continue
+        for i, (quantity, value, unit) in enumerate(section(args)):
+            table.add_row(name if i == 0 else "", quantity, value, unit)
+        table.add_section()
+    Console().print(table)
+    return 0

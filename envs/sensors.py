@@ -1,0 +1,464 @@
+"""Simulated sensors of the compass-gait robot and the decoder of their observation vector.
+
+The paper's robot (Manchester et al. 2011, Section 5) carries two optical encoders: one measures
+the angle between the legs, the other the absolute angle of one physical leg (the *inner* leg,
+called leg ``A`` here; the other leg is ``B``). Which leg is the stance leg is not measured by the
+encoders: it follows from the two foot contact switches. A terrain scanner adds ``N`` ground heights
+ahead of the stance foot.
+
+Physical angles. The absolute angle ``alpha_X`` of leg ``X`` is the angle of the foot-to-hip
+direction from the vertical, positive when the hip is ahead (+x) of that leg's foot. In the paper's
+coordinates (``q1`` inter-leg angle, ``q2`` stance-leg angle) the stance leg has ``alpha = q2`` and
+the swing leg ``alpha = q2 - q1``. The encoders read
+
+* hip encoder: ``alpha_A - alpha_B`` (the angle of leg A measured from leg B; its sign is fixed to
+  the hardware and does *not* flip at an impact),
+* leg-A encoder: ``alpha_A``.
+
+So with leg A in stance, ``q1 = hip``, ``q2 = leg_A``; with leg B in stance, ``q1 = -hip`` and
+``q2 = leg_A - hip`` (see :func:`encoders_to_q` and :func:`q_to_encoders`).
+
+Observation vector (``observation="sensors"``, float32), laid out by :class:`SensorLayout`:
+
+====================  ======================================================================
+index                 content
+====================  ======================================================================
+0                     hip encoder ``alpha_A - alpha_B`` [rad], quantised, noisy
+1                     leg-A encoder ``alpha_A`` [rad], quantised, noisy
+2                     contact switch of foot A (1.0 closed, 0.0 open)
+3                     contact switch of foot B
+4 .. 4+N-1            terrain scan: ground height [m] at ``x_s + offset + i * spacing``
+                      (``x_s`` the stance foot's x), *relative to the stance foot's height*
+                      (positive = higher than the stance foot), quantised, noisy, clipped to
+                      ``[-scan_range, scan_range]``
+====================  ======================================================================
+
+Noise is Gaussian (ziggurat method), added before quantisation (so readings stay on the encoder
+grid), drawn from a per-walker stream inside the compiled kernel; each stream is seeded from the
+environment's ``np_random`` at every reset, so the same seed gives the same noise. An optional
+latency delays the whole vector by a whole number of control periods (at a reset the delay line
+is filled with the first reading).
+
+Decoding: ``SensorLayout(N).decode(obs)`` (or :func:`decode`) returns named readings, the stance
+leg inferred from the contact switches and ``q = (q1, q2)`` in paper coordinates.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import asdict, dataclass, fields
+from typing import Any
+
+import numpy as np
+from numba import njit
+
+from .terrain import terrain_height
+
+# indices of the sensor observation
+HIP = 0
+LEG_A = 1
+CONTACT_A = 2
+CONTACT_B = 3
+SCAN = 4
+N_FIXED = 4
+
+LEG_NAMES = ("A", "B")
+
+ANGLE_BOUND = math.pi  # encoders read in [-pi, pi]
+VELOCITY_BOUND = 100.0  # state-observation joint rates are clipped to this [rad/s]
+
+
+@dataclass(frozen=True)
+class SensorConfig:
+    """Settings of the simulated sensors.
+
+    Attributes:
+        encoder_resolution: encoder quantisation step [rad], >= 0 (0: no quantisation); the
+            default is one count of a 4096-count encoder, ``2 pi / 4096``.
+        encoder_noise: standard deviation of the Gaussian noise on each encoder [rad], >= 0.
+        scan_count: number ``N`` of terrain heights, >= 0.
+        scan_offset: distance of the first scan point ahead of the stance foot [m].
+        scan_spacing: distance between scan points [m], > 0.
+        scan_noise: standard deviation of the Gaussian noise on each height [m], >= 0.
+        scan_resolution: quantisation step of the heights [m], >= 0 (0: none).
+        scan_range: heights are clipped to ``[-scan_range, scan_range]`` [m], > 0.
+        latency: delay of the whole observation in control periods, integer >= 0.
+    """
+
+    encoder_resolution: float = 2.0 * math.pi / 4096.0
+    encoder_noise: float = 0.0
+    scan_count: int = 10
+    scan_offset: float = 0.05
+    scan_spacing: float = 0.05
+    scan_noise: float = 0.0
+    scan_resolution: float = 0.0
+    scan_range: float = 0.5
+    latency: int = 0
+
+    def __post_init__(self) -> None:
+        for f in fields(self):
+            v = getattr(self, f.name)
+            if isinstance(v, bool) or not isinstance(v, (int, float, np.integer, np.floating)):
+                raise ValueError(f"sensors.{f.name} must be a number, got {v!r}")
+            if not math.isfinite(float(v)):
+                raise ValueError(f"sensors.{f.name} must be finite, got {v!r}")
+        for name in ("scan_count", "latency"):
+            v = getattr(self, name)
+            if int(v) != v or v < 0:
+                raise ValueError(f"sensors.{name} = {v!r} out of range; allowed: integer >= 0")
+            object.__setattr__(self, name, int(v))
+        for name in ("encoder_resolution", "encoder_noise", "scan_noise", "scan_resolution"):
+            v = float(getattr(self, name))
+            if v < 0:
+                raise ValueError(f"sensors.{name} = {v!r} out of range; allowed: >= 0")
+            object.__setattr__(self, name, v)
+        for name in ("scan_spacing", "scan_range"):
+            v = float(getattr(self, name))
+            if v <= 0:
+                raise ValueError(f"sensors.{name} = {v!r} out of range; allowed: > 0")
+            object.__setattr__(self, name, v)
+        object.__setattr__(self, "scan_offset", float(self.scan_offset))
+
+    @classmethod
+    def from_dict(cls, d: dict[str, Any] | SensorConfig | None) -> SensorConfig:
+        """Build from a dict (unknown keys raise ``ValueError``); ``None`` gives the defaults."""
+        if d is None:
+            return cls()
+        if isinstance(d, SensorConfig):
+            return d
+        if not isinstance(d, dict):
+            raise ValueError(f"sensors must be a mapping, got {type(d).__name__}")
+        known = {f.name for f in fields(cls)}
+        unknown = sorted(set(d) - known)
+        if unknown:
+            raise ValueError(f"unknown sensor setting(s) {unknown}; allowed: {sorted(known)}")
+        return cls(**d)
+
+    def to_dict(self) -> dict[str, Any]:
+        """Plain dict (YAML serialisable)."""
+        return asdict(self)
+
+    def replace(self, **changes: Any) -> SensorConfig:
+        """Copy with some fields changed (validated)."""
+        d = self.to_dict()
+        d.update(changes)
+        return SensorConfig.from_dict(d)
+
+    @property
+    def scan_offsets(self) -> np.ndarray:
+        """x offsets [m] of the scan points from the stance foot."""
+        return self.scan_offset + self.scan_spacing * np.arange(self.scan_count, dtype=np.float64)
+
+    def kernel_vector(self) -> np.ndarray:
+        """Flat float64 settings vector for :func:`measure`."""
+        return np.array(
+            [
+                self.encoder_resolution,
+                self.encoder_noise,
+                self.scan_noise,
+                self.scan_resolution,
+                self.scan_range,
+            ]
+        )
+
+
+@dataclass(frozen=True)
+class SensorLayout:
+    """Named slices of the sensor observation vector; build it with ``SensorLayout(scan_count)``.
+
+    Use :meth:`decode` to turn an observation into named readings and paper coordinates.
+    """
+
+    scan_count: int
+    scan_offsets: tuple[float, ...] = ()
+
+    hip = HIP
+    leg_a = LEG_A
+    contact_a = CONTACT_A
+    contact_b = CONTACT_B
+
+    @classmethod
+    def from_config(cls, config: SensorConfig) -> SensorLayout:
+        return cls(config.scan_count, tuple(float(v) for v in config.scan_offsets))
+
+    @property
+    def size(self) -> int:
+        """Length of the observation vector."""
+        return N_FIXED + self.scan_count
+
+    @property
+    def contacts(self) -> slice:
+        return slice(CONTACT_A, CONTACT_B + 1)
+
+    @property
+    def scan(self) -> slice:
+        return slice(SCAN, SCAN + self.scan_count)
+
+    def decode(self, obs: np.ndarray, previous_stance: int | None = None) -> dict[str, Any]:
+        """Named readings of one observation (or a batch, leading axes kept).
+
+        Returns a dict with ``hip`` and ``leg_a`` (encoder angles [rad]), ``contacts`` (``[A, B]``),
+        ``stance_leg`` (0 for leg A, 1 for leg B; see :func:`stance_from_contacts`), ``q``
+        (``[..., 2]``: ``q1, q2`` in paper coordinates, from the encoders and the inferred
+        stance leg) and ``scan`` (heights [m] relative to the stance foot at ``scan_offsets``).
+        """
+        o = np.asarray(obs, dtype=np.float64)
+        if o.shape[-1] != self.size:
+            raise ValueError(f"observation has {o.shape[-1]} entries; this layout has {self.size}")
+        hip, leg_a = o[..., HIP], o[..., LEG_A]
+        stance = stance_from_contacts(o[..., CONTACT_A], o[..., CONTACT_B], previous_stance)
+        q1, q2 = encoders_to_q(hip, leg_a, stance)
+        return {
+            "hip": hip,
+            "leg_a": leg_a,
+            "contacts": o[..., self.contacts],
+            "stance_leg": stance,
+            "q": np.stack([q1, q2], axis=-1),
+            "scan": o[..., self.scan],
+            "scan_offsets": np.asarray(self.scan_offsets),
+        }
+
+
+def decode(
+    obs: np.ndarray, layout: SensorLayout, previous_stance: int | None = None
+) -> dict[str, Any]:
+    """Named readings of a sensor observation: ``layout.decode(obs, previous_stance)``."""
+    return layout.decode(obs, previous_stance)
+
+
+def stance_from_contacts(
+    contact_a: float | np.ndarray, contact_b: float | np.ndarray, previous: int | None = None
+) -> int | np.ndarray:
+    """Stance leg (0 = A, 1 = B) from the contact switches.
+
+    A closed switch (> 0.5) on one foot only names the stance leg. If both or neither are closed
+    (not produced by the simulator, whose double support is instantaneous, but possible on real
+    hardware) the ``previous`` stance leg is kept, or leg A when there is none.
+    """
+    a = np.asarray(contact_a) > 0.5
+    b = np.asarray(contact_b) > 0.5
+    fallback = 0 if previous is None else int(previous)
+    out = np.where(a & ~b, 0, np.where(b & ~a, 1, fallback))
+    return int(out) if out.ndim == 0 else out
+
+
+def encoders_to_q(
+    hip: float | np.ndarray, leg_a: float | np.ndarray, stance_leg: int | np.ndarray
+) -> tuple[Any, Any]:
+    """Paper coordinates ``(q1, q2)`` [rad] from the two encoder angles and the stance leg.
+
+    Leg A in stance (0): ``q1 = hip``, ``q2 = leg_a``; leg B in stance (1): ``q1 = -hip``,
+    ``q2 = leg_a - hip``.
+    """
+    b = np.asarray(stance_leg) == 1
+    q1 = np.where(b, -np.asarray(hip), hip)
+    q2 = np.where(b, np.asarray(leg_a) - np.asarray(hip), leg_a)
+    if q1.ndim == 0:
+        return float(q1), float(q2)
+    return q1, q2
+
+
+def q_to_encoders(
+    q1: float | np.ndarray, q2: float | np.ndarray, stance_leg: int | np.ndarray
+) -> tuple[Any, Any]:
+    """Ideal encoder readings ``(hip, leg_a)`` [rad] for the paper coordinates and stance leg."""
+    b = np.asarray(stance_leg) == 1
+    hip = np.where(b, -np.asarray(q1), q1)
+    leg_a = np.where(b, np.asarray(q2) - np.asarray(q1), q2)
+    if hip.ndim == 0:
+        return float(hip), float(leg_a)
+    return hip, leg_a
+
+
+# ---------------------------------------------------------------------------- noise streams
+_GOLDEN = np.uint64(0x9E3779B97F4A7C15)
+_MIX1 = np.uint64(0xBF58476D1CE4E5B9)
+_MIX2 = np.uint64(0x94D049BB133111EB)
+
+
+@njit(cache=True)
+def _next_u64(state, i):
+    """splitmix64 step of stream ``i``."""
+    z = state[i] + _GOLDEN
+    state[i] = z
+    z = (z ^ (z >> np.uint64(30))) * _MIX1
+    z = (z ^ (z >> np.uint64(27))) * _MIX2
+    return z ^ (z >> np.uint64(31))
+
+
+@njit(cache=True)
+def _uniform(state, i):
+    """Uniform in [0, 1) with 53 random bits."""
+    return float(_next_u64(state, i) >> np.uint64(11)) * (1.0 / 9007199254740992.0)
+
+
+def _ziggurat_tables() -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Tables of the 128-layer ziggurat for the standard normal (Marsaglia and Tsang 2000)."""
+    kn = np.zeros(128, dtype=np.int64)
+    wn = np.zeros(128)
+    fn = np.zeros(128)
+    m1 = 2147483648.0
+    dn = tn = 3.442619855899
+    vn = 9.91256303526217e-3
+    q = vn / math.exp(-0.5 * dn * dn)
+    kn[0] = int((dn / q) * m1)
+    kn[1] = 0
+    wn[0] = q / m1
+    wn[127] = dn / m1
+    fn[0] = 1.0
+    fn[127] = math.exp(-0.5 * dn * dn)
+    for i in range(126, 0, -1):
+        dn = math.sqrt(-2.0 * math.log(vn / dn + math.exp(-0.5 * dn * dn)))
+        kn[i + 1] = int((dn / tn) * m1)
+        tn = dn
+        fn[i] = math.exp(-0.5 * dn * dn)
+        wn[i] = dn / m1
+    return kn, wn, fn
+
+
+_ZKN, _ZWN, _ZFN = _ziggurat_tables()
+_ZR = 3.442619855899  # start of the tail
+
+
+@njit(cache=True)
+def _normal(state, i):
+    """Standard normal from stream ``i`` (ziggurat; layer from the low 7 bits of a 64-bit draw,
+    the signed abscissa from its high 32 bits, so the two are independent)."""
+    while True:
+        u = _next_u64(state, i)
+        iz = np.int64(u & np.uint64(127))
+        hz = np.int64(np.int32(np.uint32(u >> np.uint64(32))))
+        if abs(hz) < _ZKN[iz]:
+            return hz * _ZWN[iz]
+        x = hz * _ZWN[iz]
+        if iz == 0:
+            # the tail beyond _ZR (Marsaglia's method)
+            while True:
+                xt = -math.log(1.0 - _uniform(state, i)) / _ZR
+                yt = -math.log(1.0 - _uniform(state, i))
+                if yt + yt >= xt * xt:
+                    break
+            return _ZR + xt if hz > 0 else -_ZR - xt
+        if _ZFN[iz] + _uniform(state, i) * (_ZFN[iz - 1] - _ZFN[iz]) < math.exp(-0.5 * x * x):
+            return x
+
+
+@njit(cache=True)
+def standard_normal(state, i, out):
+    """Fill ``out`` with standard normals from stream ``i`` (for tests of the noise model)."""
+    for k in range(out.size):
+        out[k] = _normal(state, i)
+
+
+def seed_streams(rng: np.random.Generator, count: int = 1) -> np.ndarray:
+    """``count`` stream states drawn from a NumPy generator (the env's ``np_random``)."""
+    return rng.integers(0, 2**63, size=count, dtype=np.int64).astype(np.uint64)
+
+
+# ---------------------------------------------------------------------------- measurement
+@njit(cache=True)
+def _quantise(x, res):
+    if res > 0.0:
+        return res * np.rint(x / res)
+    return x
+
+
+@njit(cache=True)
+def _clip(x, bound):
+    if x > bound:
+        return bound
+    if x < -bound:
+        return -bound
+    return x
+
+
+@njit(cache=True)
+def scan_walker(i, xs, ys, tx, ty, tn, offsets, scan):
+    """Exact terrain heights ahead of walker ``i``'s stance foot into ``scan[i]`` [m].
+
+    ``scan[i, k] = h(xs + offsets[k]) - ys``; they change only when the stance foot moves (at
+    an impact or a reset), so the environments recompute them only then.
+    """
+    if offsets.size == 0:
+        return
+    txi, tyi, m = tx[i], ty[i], tn[i]
+    for k in range(offsets.size):
+        scan[i, k] = terrain_height(txi, tyi, m, xs + offsets[k]) - ys
+
+
+@njit(cache=True)
+def measure_walker(i, q1, q2, leg, settings, scan, streams, obs):
+    """Sensor readings of walker ``i`` written into ``obs[i]`` (float32 row of ``4 + N``).
+
+    Args:
+        i: walker index (row of ``scan`` and ``obs``; noise stream ``streams[i]``, advanced in
+            place).
+        q1, q2: joint angles [rad] (paper coordinates).
+        leg: physical stance leg, 0 = A, 1 = B.
+        settings: :meth:`SensorConfig.kernel_vector`.
+        scan: ``(n, N)`` exact terrain heights relative to the stance foot (:func:`scan_walker`).
+        obs: ``(n, 4 + N)`` float32 output.
+    """
+    enc_res, enc_noise = settings[0], settings[1]
+    scan_noise, scan_res, scan_range = settings[2], settings[3], settings[4]
+    if leg == 1:
+        hip, leg_a = -q1, q2 - q1
+    else:
+        hip, leg_a = q1, q2
+    if enc_noise > 0.0:
+        hip += enc_noise * _normal(streams, i)
+        leg_a += enc_noise * _normal(streams, i)
+    obs[i, 0] = _clip(_quantise(hip, enc_res), math.pi)
+    obs[i, 1] = _clip(_quantise(leg_a, enc_res), math.pi)
+    obs[i, 2] = 1.0 if leg == 0 else 0.0
+    obs[i, 3] = 1.0 if leg == 1 else 0.0
+    for k in range(scan.shape[1]):
+        h = scan[i, k]
+        if scan_noise > 0.0:
+            h += scan_noise * _normal(streams, i)
+        obs[i, 4 + k] = _clip(_quantise(h, scan_res), scan_range)
+
+
+@njit(cache=True)
+def state_walker(i, q1, q2, q1d, q2d, leg, scan, scan_range, obs):
+    """Privileged observation of walker ``i`` into ``obs[i]`` (float32 row of ``5 + N``).
+
+    Layout: ``q1, q2`` [rad], ``q1dot, q2dot`` [rad/s] (clipped to +-VELOCITY_BOUND), stance
+    flag (1.0 when leg B is the stance leg), then the ``N`` exact terrain heights relative to
+    the stance foot at the scan offsets (clipped to +-scan_range).
+    """
+    obs[i, 0] = _clip(q1, math.pi)
+    obs[i, 1] = _clip(q2, math.pi)
+    obs[i, 2] = _clip(q1d, VELOCITY_BOUND)
+    obs[i, 3] = _clip(q2d, VELOCITY_BOUND)
+    obs[i, 4] = 1.0 if leg == 1 else 0.0
+    for k in range(scan.shape[1]):
+        obs[i, 5 + k] = _clip(scan[i, k], scan_range)
+
+
+STATE_FIXED = 5
+
+
+def state_layout_doc() -> str:
+    """Human-readable layout of the ``observation="state"`` vector."""
+    return "q1, q2 [rad], q1dot, q2dot [rad/s], stance_is_B {0,1}, N terrain heights [m]"
+
+
+def observation_bounds(config: SensorConfig, mode: str) -> tuple[np.ndarray, np.ndarray]:
+    """Finite ``(low, high)`` float32 bounds of the observation vector for ``mode``."""
+    n = config.scan_count
+    r = config.scan_range
+    if mode == "sensors":
+        high = np.array([ANGLE_BOUND, ANGLE_BOUND, 1.0, 1.0] + [r] * n, dtype=np.float32)
+        low = -high
+        low[CONTACT_A] = low[CONTACT_B] = 0.0
+    elif mode == "state":
+        high = np.array(
+            [ANGLE_BOUND, ANGLE_BOUND, VELOCITY_BOUND, VELOCITY_BOUND, 1.0] + [r] * n,
+            dtype=np.float32,
+        )
+        low = -high
+        low[4] = 0.0
+    else:
+        raise ValueError(f"observation = {mode!r}; allowed: 'sensors', 'state'")
+    return low, high
