@@ -14,6 +14,7 @@ COMMANDS: dict[str, tuple[str, str]] = {
     "bench": ("agents.bench", "simulator, environment and controller speed"),
     "train": ("agents.train", "train an RL agent from a config"),
     "evaluate": ("agents.evaluate", "evaluate a policy on held-out terrain"),
+    "compare": ("agents.compare", "baselines versus RL agents on every terrain, one table"),
 }
 
 

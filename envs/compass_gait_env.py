@@ -543,11 +543,12 @@ class WalkerBatch:
         return self.fresh[i].copy()
 
     # ------------------------------------------------------------------ info
-    def info(self, i: int) -> dict[str, Any]:
-        """Info dict of walker ``i`` (true state etc.; see :class:`CompassGaitEnv`)."""
+    def info(self, i: int, terrain: bool = True) -> dict[str, Any]:
+        """Info dict of walker ``i`` (true state etc.; see :class:`CompassGaitEnv`); with
+        ``terrain``, also the course's spec."""
         q, qd, foot = self._q[i], self._qd[i], self._foot[i]
         status = int(self._status[i])
-        return {
+        info = {
             "state": np.array((q[0], q[1], qd[0], qd[1])),
             "stance_foot": np.array((foot[0], foot[1])),
             "stance_leg": int(self._leg[i]),
@@ -557,8 +558,10 @@ class WalkerBatch:
             "impacts": int(self._nimp[i]),
             "motor_work": float(self.acc[i, 1]),
             "failure": FAILURES[status] if status else None,
-            "terrain": dict(self.specs[i]),
         }
+        if terrain:
+            info["terrain"] = dict(self.specs[i])
+        return info
 
     def infos(self) -> dict[str, Any]:
         """Batched info (arrays over walkers, with Gymnasium's ``_key`` masks all True)."""
@@ -729,8 +732,9 @@ class CompassGaitEnv(gym.Env):
     ``stance_foot`` (``[x, y]`` m), ``stance_leg`` (0 = A, 1 = B), ``time`` (s),
     ``footsteps`` (impacts since reset), ``distance`` (hip displacement since reset, m),
     ``impacts`` (in this step), ``motor_work`` (this step, J, the kind ``reward.work``),
-    ``failure`` (name or None) and ``terrain`` (the course's spec dict: ``Terrain.from_dict``
-    rebuilds it exactly, so any episode can be replayed; do not modify it).
+    ``failure`` (name or None); ``reset`` and the step that terminates an episode also return
+    ``terrain`` (the course's spec dict: ``Terrain.from_dict`` rebuilds it exactly, so any
+    episode can be replayed; do not modify it). The vector env returns it at every step.
 
     ## Arguments
 
@@ -847,12 +851,13 @@ class CompassGaitEnv(gym.Env):
         b.step()
         if self.render_mode == "human":
             self.render()
+        terminated = bool(b.terminated[0])
         return (
             b.observation(0),
             float(b.reward[0]),
-            bool(b.terminated[0]),
+            terminated,
             False,
-            b.info(0),
+            b.info(0, terrain=terminated),
         )
 
     def render(self) -> np.ndarray | None:

@@ -1,0 +1,227 @@
+"""Run the whole RL-versus-control comparison: baselines and every agent config, one table.
+
+For each terrain setting (flat, the paper's stairs, rough blocks at two difficulty levels) it
+evaluates the baselines (passive, PD, reference controller) and, for every config in
+``configs/agents`` whose env matches the setting, trains the agent (unless its run already has a
+final model) and evaluates the final model, all on the same held-out seeds. It writes
+``compare.json`` (every episode), ``compare.csv`` and ``compare.md`` (the summary table with the
+command reproducing each row and the training budget) to ``--out`` and prints the table.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+from agents.config import TEST_SEED, AgentConfig, ConfigError, load_config
+from agents.evaluate import Evaluation, evaluate, print_table, write_csv
+
+CONFIG_DIR = Path(__file__).resolve().parent.parent / "configs" / "agents"
+
+
+@dataclass(frozen=True)
+class Setting:
+    """A column of the comparison: an env id with keyword arguments."""
+
+    name: str
+    env_id: str
+    env_kwargs: tuple[tuple[str, Any], ...] = ()
+
+    @property
+    def kwargs(self) -> dict[str, Any]:
+        return dict(self.env_kwargs)
+
+    def matches(self, cfg: AgentConfig) -> bool:
+        return cfg.env_id == self.env_id and cfg.env_kwargs == self.kwargs
+
+
+SETTINGS = (
+    Setting("flat", "roughwalk/CompassGaitFlat-v0"),
+    Setting("stairs", "roughwalk/CompassGaitStairs-v0"),
+    Setting("rough", "roughwalk/CompassGaitRough-v0", (("difficulty", 1.0),)),
+    Setting("rough-hard", "roughwalk/CompassGaitRough-v0", (("difficulty", 2.0),)),
+)
+BASELINE_ROWS = ("passive", "pd", "reference")
+
+
+def agent_label(cfg: AgentConfig) -> str:
+    """``PPO``, ``residual SAC``, ..."""
+    return ("residual " if cfg.is_residual else "") + cfg.algo.upper()
+
+
+def _kwargs_args(kwargs: dict[str, Any]) -> str:
+    return (" --env-kwargs " + " ".join(f"{k}={v}" for k, v in kwargs.items())) if kwargs else ""
+
+
+def evaluate_command(policy: str, s: Setting, episodes: int, seed: int) -> str:
+    """The ``roughwalk evaluate`` command reproducing one row."""
+    return (
+        f"roughwalk evaluate --policy {policy} --env {s.env_id}{_kwargs_args(s.kwargs)}"
+        f" --episodes {episodes} --seed {seed}"
+    )
+
+
+def _display(path: Path) -> str:
+    """``path`` relative to the working directory when below it (commands in the table)."""
+    try:
+        return str(Path(path).resolve().relative_to(Path.cwd()))
+    except ValueError:
+        return str(path)
+
+
+def budget(cfg: AgentConfig, run_dir: Path) -> str:
+    """Training budget of a run: env steps, and wall time from its manifest."""
+    text = f"{cfg.n_timesteps:,} steps"
+    manifest = run_dir / "manifest.json"
+    if manifest.is_file():
+        import datetime as dt
+
+        m = json.loads(manifest.read_text())
+        if "started" in m and "finished" in m:
+            wall = dt.datetime.fromisoformat(m["finished"]) - dt.datetime.fromisoformat(
+                m["started"]
+            )
+            text += f", {wall.total_seconds() / 60:.0f} min"
+    return text
+
+
+def load_agent_configs(
+    config_dir: Path, only: str | None, hyperparams: dict[str, Any] | None
+) -> list[AgentConfig]:
+    """Every config of ``config_dir`` (names containing ``only``, if given)."""
+    paths = sorted(config_dir.glob("*.yaml"))
+    if only:
+        paths = [p for p in paths if only in p.stem]
+    return [load_config(p, hyperparams) for p in paths]
+
+
+def compare(
+    config_dir: Path = CONFIG_DIR,
+    log_dir: Path = Path("runs"),
+    out: Path = Path("results"),
+    episodes: int = 50,
+    seed: int = TEST_SEED,
+    only: str | None = None,
+    baselines: tuple[str, ...] = BASELINE_ROWS,
+    settings: tuple[Setting, ...] = SETTINGS,
+    train_missing: bool = True,
+    hyperparams: dict[str, Any] | None = None,
+    dry_run: bool = False,
+    progress: bool = True,
+) -> list[dict[str, Any]]:
+    """Run the comparison; returns one row dict per (setting, policy) (see ``compare.md``)."""
+    from agents.train import run_dir_for, train
+
+    configs = load_agent_configs(Path(config_dir), only, hyperparams)
+    rows: list[dict[str, Any]] = []
+    evaluations: list[Evaluation] = []
+    for s in settings:
+        for name in baselines:
+            cmd = evaluate_command(name, s, episodes, seed)
+            row = {"setting": s.name, "policy": name, "budget": "-", "command": cmd}
+            if not dry_run:
+                ev = evaluate(name, s.env_id, episodes, seed, s.kwargs, progress=progress)
+                evaluations.append(ev)
+                row["summary"] = ev.summary
+            rows.append(row)
+        for cfg in (c for c in configs if s.matches(c)):
+            run_dir = run_dir_for(cfg, log_dir)
+            model = run_dir / "model.zip"
+            train_cmd = f"roughwalk train {_display(cfg.path)} --log-dir {log_dir}"
+            cmd = f"{train_cmd} && " + evaluate_command(str(model), s, episodes, seed)
+            row = {"setting": s.name, "policy": agent_label(cfg), "command": cmd}
+            if not dry_run:
+                if not model.is_file():
+                    if not train_missing:
+                        raise FileNotFoundError(f"{model} missing (run: {train_cmd})")
+                    train(cfg, log_dir=log_dir, progress_bar=progress, threads=None)
+                ev = evaluate(str(model), s.env_id, episodes, seed, s.kwargs, progress=progress)
+                evaluations.append(ev)
+                row["summary"] = ev.summary
+            row["budget"] = budget(cfg, run_dir)
+            rows.append(row)
+    if not dry_run:
+        out = Path(out)
+        out.mkdir(parents=True, exist_ok=True)
+        (out / "compare.json").write_text(
+            json.dumps({"rows": rows, "evaluations": [e.to_dict() for e in evaluations]}, indent=2)
+            + "\n"
+        )
+        write_csv(evaluations, out / "compare.csv")
+        (out / "compare.md").write_text(markdown_table(rows))
+        print_table(evaluations, title=f"held-out seeds from {seed}, {episodes} episodes")
+    return rows
+
+
+def _cell(summary: dict[str, Any] | None, key: str, spec: str, scale: float = 1.0) -> str:
+    if summary is None or summary.get(key) is None:
+        return "-"
+    return format(summary[key] * scale, spec)
+
+
+def markdown_table(rows: list[dict[str, Any]]) -> str:
+    """The README table: one line per (setting, policy)."""
+    lines = [
+        "| terrain | policy | success [%] | footsteps | distance [m] | speed [m/s] | CoT "
+        "| training budget | command |",
+        "|---|---|---:|---:|---:|---:|---:|---|---|",
+    ]
+    for r in rows:
+        s = r.get("summary")
+        lines.append(
+            f"| {r['setting']} | {r['policy']} | {_cell(s, 'success_rate', '.0f', 100)} "
+            f"| {_cell(s, 'mean_footsteps', '.1f')} | {_cell(s, 'mean_distance', '.2f')} "
+            f"| {_cell(s, 'mean_speed', '.3f')} | {_cell(s, 'cost_of_transport', '.2f')} "
+            f"| {r['budget']} | `{r['command']}` |"
+        )
+    return "\n".join(lines) + "\n"
+
+
+def configure(parser: argparse.ArgumentParser) -> None:
+    """Arguments of ``roughwalk compare``."""
+    parser.add_argument("--configs", type=Path, default=CONFIG_DIR, help="agent config folder")
+    parser.add_argument("--only", help="only agent configs whose name contains this")
+    parser.add_argument("--log-dir", type=Path, default=Path("runs"), help="runs folder")
+    parser.add_argument("--out", type=Path, default=Path("results"), help="output folder")
+    parser.add_argument("--episodes", type=int, default=50, help="episodes per row")
+    parser.add_argument(
+        "--seed", type=int, default=TEST_SEED, help="held-out seed offset (as evaluate)"
+    )
+    parser.add_argument(
+        "--no-train", action="store_true", help="fail instead of training missing agents"
+    )
+    parser.add_argument(
+        "--dry-run", action="store_true", help="print the table of commands, run nothing"
+    )
+    parser.add_argument("--no-progress", action="store_true", help="no progress bars")
+    parser.add_argument("--threads", type=int, default=1, help="torch threads (default 1)")
+
+
+def run(args: argparse.Namespace) -> int:
+    """``roughwalk compare``."""
+    from agents.train import set_threads
+
+    set_threads(args.threads)
+    try:
+        rows = compare(
+            config_dir=args.configs,
+            log_dir=args.log_dir,
+            out=args.out,
+            episodes=args.episodes,
+            seed=args.seed,
+            only=args.only,
+            train_missing=not args.no_train,
+            dry_run=args.dry_run,
+            progress=not args.no_progress,
+        )
+    except (ConfigError, FileNotFoundError, ValueError) as exc:
+        print(f"roughwalk compare: error: {exc}")
+        return 2
+    if args.dry_run:
+        print(markdown_table(rows), end="")
+    else:
+        print(f"results in {args.out}/compare.md, compare.json, compare.csv")
+    return 0

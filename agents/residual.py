@@ -1,0 +1,139 @@
+"""Residual RL: the agent learns a correction on top of a base (reference) policy.
+
+The residual lives in the environment, not in the agent: ``ResidualWrapper`` turns the agent's
+action ``a`` in [-1, 1] into the command ``clip(b + scale * a, -1, 1)`` sent to the wrapped
+env. ``b = clip(base(obs), -1, 1)`` is the command of a base policy, i.e. what it would apply on
+its own (so the residual can also pull a saturated command back); the base policy has
+``reset()`` and ``__call__(obs) -> action``
+(by default the reference controller, ``controllers.make_reference_policy``). Any RL algorithm
+then trains on the residual unchanged: PPO's rollouts and SAC's replay buffer see the agent's
+own action, the env applies the sum. (Overriding an SB3 policy's ``predict`` instead would be
+silently wrong, because rollout collection and off-policy sampling bypass ``predict``.)
+
+With ``observe_base=True`` the base command is appended to the observation as its last entry,
+so the agent knows what it is correcting. ``info`` carries ``base_action``, ``residual_action``
+(the scaled residual) and ``total_action`` for every step. A zero residual reproduces the base
+policy exactly (for base policies that return the action space's float32, as the roughwalk
+controllers do). The wrapper is a plain ``gymnasium.Wrapper``, so it works with SB3's
+``make_vec_env`` (``wrapper_class``), ``VecNormalize``, rl-zoo3's ``env_wrapper`` and the
+vector-env adapter.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from typing import Any
+
+import gymnasium as gym
+import numpy as np
+from gymnasium import spaces
+
+from agents.policies import Policy, make_baseline_policy
+
+BaseSpec = str | Policy | Callable[[gym.Env], Policy]
+
+
+class ResidualWrapper(gym.Wrapper, gym.utils.RecordConstructorArgs):
+    """Adds the agent's scaled action to a base policy's command.
+
+    Args:
+        env: an env with a ``Box`` action space in [-1, 1] (the roughwalk envs' normalised
+            hip command) and, with ``observe_base``, a ``Box`` observation space.
+        base: the base policy: a name accepted by ``agents.policies.make_baseline_policy``
+            (``"reference"``, ``"pd"``, ``"passive"``), a policy object, or a factory
+            ``env -> policy`` (called once with the wrapped env).
+        scale: residual authority, in action units: the agent can move the command by at most
+            ``scale`` either way; > 0.
+        observe_base: append the base command to the observation.
+        base_kwargs: options of a named base policy (e.g. ``planner`` settings of the
+            reference controller; see ``agents.policies.make_baseline_policy``).
+
+    Out-of-range agent actions are clipped to [-1, 1]; NaN or inf raise ``ValueError``.
+    """
+
+    def __init__(
+        self,
+        env: gym.Env,
+        base: BaseSpec = "reference",
+        scale: float = 0.3,
+        observe_base: bool = True,
+        base_kwargs: dict[str, Any] | None = None,
+    ) -> None:
+        gym.utils.RecordConstructorArgs.__init__(
+            self, base=base, scale=scale, observe_base=observe_base, base_kwargs=base_kwargs
+        )
+        gym.Wrapper.__init__(self, env)
+        act = env.action_space
+        if not isinstance(act, spaces.Box):
+            raise ValueError(f"ResidualWrapper needs a Box action space, got {act}")
+        if not (np.isfinite(scale) and scale > 0):
+            raise ValueError(f"scale = {scale!r} is out of range; allowed: > 0 (action units)")
+        self.scale = float(scale)
+        self.observe_base = bool(observe_base)
+        self._low = act.low.astype(np.float64)
+        self._high = act.high.astype(np.float64)
+        self.action_space = spaces.Box(-1.0, 1.0, shape=act.shape, dtype=np.float32)
+        if self.observe_base:
+            obs_space = env.observation_space
+            if not isinstance(obs_space, spaces.Box) or len(obs_space.shape) != 1:
+                raise ValueError(
+                    f"observe_base=True needs a flat Box observation space, got {obs_space}"
+                )
+            self.observation_space = spaces.Box(
+                low=np.concatenate([obs_space.low, act.low.ravel()]).astype(obs_space.dtype),
+                high=np.concatenate([obs_space.high, act.high.ravel()]).astype(obs_space.dtype),
+                dtype=obs_space.dtype,
+            )
+        self.base_name = base if isinstance(base, str) else type(base).__name__
+        if isinstance(base, str):
+            self.base_policy: Policy = make_baseline_policy(base, env, **(base_kwargs or {}))
+        elif isinstance(base, type) or (callable(base) and not hasattr(base, "reset")):
+            self.base_policy = base(env)  # a factory (e.g. a policy class)
+        elif callable(base):
+            self.base_policy = base  # type: ignore[assignment]
+        else:
+            raise ValueError(f"base must be a policy name, a policy or a factory, got {base!r}")
+        if base_kwargs and not isinstance(base, str):
+            raise ValueError("base_kwargs apply to a named base policy only")
+        self._base = np.zeros(act.shape, dtype=np.float64)
+
+    def _base_command(self, obs: Any) -> np.ndarray:
+        """The base policy's command for ``obs``, clipped to the action limits."""
+        cmd = np.asarray(self.base_policy(obs), dtype=np.float64).reshape(self._low.shape)
+        if not np.all(np.isfinite(cmd)):
+            raise ValueError(f"base policy {self.base_name!r} returned a non-finite action {cmd}")
+        return np.clip(cmd, self._low, self._high)
+
+    def _observe(self, obs: np.ndarray) -> np.ndarray:
+        if not self.observe_base:
+            return obs
+        return np.concatenate([obs, self._base.ravel()]).astype(
+            self.observation_space.dtype, copy=False
+        )
+
+    def reset(
+        self, *, seed: int | None = None, options: dict[str, Any] | None = None
+    ) -> tuple[Any, dict[str, Any]]:
+        """Reset the env, then the base policy (which may read the new course from the env)."""
+        obs, info = self.env.reset(seed=seed, options=options)
+        self.base_policy.reset()
+        self._base = self._base_command(obs)
+        info = dict(info)
+        info["base_action"] = self._base.astype(np.float32)
+        return self._observe(obs), info
+
+    def step(self, action: Any) -> tuple[Any, float, bool, bool, dict[str, Any]]:
+        """Apply ``clip(base + scale * clip(action, -1, 1))``; log base, residual and total."""
+        a = np.asarray(action, dtype=np.float64).reshape(self._low.shape)
+        if not np.all(np.isfinite(a)):
+            raise ValueError(f"residual action must be finite, got {action!r}")
+        residual = self.scale * np.clip(a, -1.0, 1.0)
+        base = self._base
+        total = np.clip(base + residual, self._low, self._high).astype(np.float32)
+        obs, reward, terminated, truncated, info = self.env.step(total)
+        info = dict(info)
+        info["base_action"] = base.astype(np.float32)
+        info["residual_action"] = residual.astype(np.float32)
+        info["total_action"] = total
+        self._base = self._base_command(obs)
+        return self._observe(obs), reward, terminated, truncated, info

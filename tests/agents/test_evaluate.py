@@ -1,0 +1,167 @@
+"""Evaluation: metrics on constructed cases, seed split, outputs, trained models, comparison."""
+
+from __future__ import annotations
+
+import csv
+import json
+from pathlib import Path
+
+import gymnasium as gym
+import numpy as np
+import pytest
+
+import envs  # noqa: F401
+from agents.cli import main
+from agents.config import EVAL_SEED_OFFSET, TEST_SEED, TRAIN_SEED_LIMIT
+from agents.evaluate import Evaluation, eval_seeds, evaluate, run_episode, write_csv, write_json
+from agents.policies import ZeroPolicy
+
+SLOPE = "roughwalk/CompassGaitSlope-v0"
+FLAT = "roughwalk/CompassGaitFlat-v0"
+
+
+class Constant:
+    """Stand-in policy: the same command at every step."""
+
+    def __init__(self, value: float) -> None:
+        self.value = np.array([value], dtype=np.float32)
+
+    def reset(self) -> None:
+        pass
+
+    def __call__(self, obs):
+        return self.value
+
+
+def test_seeds_are_held_out_and_validated():
+    assert eval_seeds(0, 3) == [EVAL_SEED_OFFSET, EVAL_SEED_OFFSET + 1, EVAL_SEED_OFFSET + 2]
+    assert min(eval_seeds(TEST_SEED, 5)) >= TRAIN_SEED_LIMIT
+    with pytest.raises(ValueError, match="seed = -1 is out of range"):
+        eval_seeds(-1, 3)
+    with pytest.raises(ValueError, match="episodes = 0"):
+        eval_seeds(0, 0)
+
+
+def test_a_policy_that_always_walks():
+    # the classic walker on its slope walks passively: zero torque never fails
+    ev = evaluate("passive", SLOPE, episodes=3, seed=0)
+    env = gym.make(SLOPE)
+    limit, dt = env.spec.max_episode_steps, env.unwrapped.dt
+    s = ev.summary
+    assert s["success_rate"] == 1.0 and s["failure_reasons"] == {}
+    assert s["mean_footsteps_failed"] is None
+    for e in ev.episodes:
+        assert e.success and e.failure is None and e.steps == limit
+        assert e.duration == pytest.approx(limit * dt)
+        # about one 0.536 m step every 0.734 s on the passive limit cycle
+        assert e.footsteps == pytest.approx(e.duration / 0.734461, abs=2)
+        assert e.speed == pytest.approx(e.distance / e.duration)
+        assert e.speed == pytest.approx(0.535919 / 0.734461, rel=0.1)
+        assert e.motor_work == 0.0 and e.cost_of_transport == 0.0  # no torque, no work
+    assert s["cost_of_transport"] == 0.0
+    assert s["mean_distance"] == pytest.approx(np.mean([e.distance for e in ev.episodes]))
+    assert [e.seed for e in ev.episodes] == eval_seeds(0, 3)
+
+
+def test_a_policy_that_always_falls():
+    env = gym.make(FLAT)
+    mass, g = env.unwrapped.params.total_mass, env.unwrapped.params.g
+    results = [run_episode(env, Constant(1.0), seed) for seed in eval_seeds(0, 4)]
+    ev = Evaluation("constant", FLAT, {}, results, mass, g)
+    s = ev.summary
+    assert s["success_rate"] == 0.0
+    assert sum(s["failure_reasons"].values()) == 4
+    assert set(s["failure_reasons"]) <= set(envs.FAILURES)
+    for e in results:
+        assert not e.success and e.failure in s["failure_reasons"]
+        assert e.steps < env.spec.max_episode_steps
+        assert e.motor_work > 0  # full torque on a moving hip does work
+        if e.distance > 0:
+            assert e.cost_of_transport == pytest.approx(e.motor_work / (mass * g * e.distance))
+    assert s["mean_footsteps_failed"] == pytest.approx(np.mean([e.footsteps for e in results]))
+    total_work = sum(e.motor_work for e in results)
+    total_dist = sum(e.distance for e in results)
+    assert s["cost_of_transport"] == pytest.approx(total_work / (mass * g * total_dist))
+
+
+def test_same_seed_same_result_and_episodes_replay():
+    a = evaluate("passive", FLAT, episodes=2, seed=7)
+    b = evaluate("passive", FLAT, episodes=2, seed=7)
+    assert a.to_dict() == b.to_dict()
+    # an episode is replayed from its recorded absolute seed alone
+    env = gym.make(FLAT)
+    again = run_episode(env, ZeroPolicy(env.action_space), a.episodes[1].seed)
+    assert again == a.episodes[1]
+
+
+def test_json_and_csv_outputs(tmp_path: Path):
+    ev = evaluate("passive", SLOPE, episodes=2, seed=0)
+    write_json([ev], tmp_path / "out.json")
+    write_csv([ev], tmp_path / "out.csv")
+    data = json.loads((tmp_path / "out.json").read_text())
+    assert data["summary"]["success_rate"] == 1.0 and len(data["episodes"]) == 2
+    assert data["episodes"][0]["seed"] == EVAL_SEED_OFFSET
+    rows = list(csv.DictReader(open(tmp_path / "out.csv")))
+    assert len(rows) == 2 and rows[1]["seed"] == str(EVAL_SEED_OFFSET + 1)
+    assert float(rows[0]["distance"]) == pytest.approx(ev.episodes[0].distance)
+
+
+def test_cli_evaluate(tmp_path: Path, capsys):
+    out = tmp_path / "e.json"
+    argv = ["evaluate", "--policy", "passive", "--env", SLOPE, "--episodes", "2"]
+    assert main([*argv, "--seed", "3", "--json", str(out), "--no-progress"]) == 0
+    printed = capsys.readouterr().out
+    assert "success" in printed and "100%" in printed
+    assert json.loads(out.read_text())["episodes"][0]["seed"] == EVAL_SEED_OFFSET + 3
+    assert main(["evaluate", "--policy", "passive", "--env", "roughwalk/Nope-v0"]) == 2
+    assert "unknown environment id" in capsys.readouterr().out
+    assert main(["evaluate", "--policy", str(tmp_path / "missing.zip"), "--env", FLAT]) == 2
+    assert "model file not found" in capsys.readouterr().out
+
+
+def test_trained_model_evaluation_and_learning_curve(trained_ppo_run: Path, tmp_path: Path):
+    model = trained_ppo_run / "model.zip"
+    png = tmp_path / "curve.png"
+    argv = ["evaluate", "--policy", str(model), "--episodes", "2", "--no-progress"]
+    assert main([*argv, "--csv", str(tmp_path / "m.csv"), "--plot-learning-curve", str(png)]) == 0
+    assert png.is_file() and png.stat().st_size > 5000
+    # the env defaults to the run's (with its smoke-test time limit)
+    ev = evaluate(str(model), None, episodes=2, seed=0)
+    assert ev.env_id == FLAT and ev.env_kwargs == {"max_episode_steps": 200}
+    assert all(e.steps <= 200 for e in ev.episodes)
+    # a checkpoint is evaluated with its own normalisation statistics
+    ckpt = next((trained_ppo_run / "checkpoints").glob("rl_model_*_steps.zip"))
+    evaluate(str(ckpt), None, episodes=1, seed=0)
+
+
+def test_compare_dry_run_lists_every_row(capsys):
+    assert main(["compare", "--dry-run"]) == 0
+    table = capsys.readouterr().out
+    lines = [ln for ln in table.splitlines() if ln.startswith("| ") and "---" not in ln][1:]
+    # 4 terrain settings x (3 baselines + 4 agents)
+    assert len(lines) == 4 * 7
+    assert "roughwalk train" in table and "--env-kwargs difficulty=2.0" in table
+
+
+def test_compare_trains_evaluates_and_writes_the_table(tmp_path: Path):
+    from agents.compare import SETTINGS, compare
+
+    tiny = {"n_timesteps": 256, "n_envs": 2, "n_steps": 64, "batch_size": 64, "n_epochs": 1}
+    rows = compare(
+        log_dir=tmp_path / "runs",
+        out=tmp_path / "results",
+        episodes=2,
+        only="ppo_flat",
+        baselines=("passive",),
+        settings=SETTINGS[:1],
+        hyperparams=tiny,
+        progress=False,
+    )
+    assert [(r["setting"], r["policy"]) for r in rows] == [("flat", "passive"), ("flat", "PPO")]
+    assert rows[1]["budget"].startswith("256 steps")
+    assert (tmp_path / "runs" / "ppo_flat_s0" / "model.zip").is_file()
+    table = (tmp_path / "results" / "compare.md").read_text()
+    assert "| flat | PPO |" in table and "ppo_flat.yaml --log-dir" in table
+    data = json.loads((tmp_path / "results" / "compare.json").read_text())
+    assert len(data["evaluations"]) == 2
+    assert all(len(e["episodes"]) == 2 for e in data["evaluations"])

@@ -1,0 +1,160 @@
+"""Training: every shipped config trains end to end; save/load, resume, seeds, CLI, rl-zoo3."""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+from stable_baselines3.common.vec_env import VecNormalize
+
+from agents.cli import main
+from agents.config import EVAL_SEED_OFFSET, TRAIN_SEED_LIMIT, load_config
+from agents.policies import TrainedPolicy, find_vecnormalize, load_vecnormalize
+from agents.train import build, save, train
+
+CONFIG_DIR = Path(__file__).resolve().parents[2] / "configs" / "agents"
+CONFIGS = sorted(CONFIG_DIR.glob("*.yaml"))
+
+
+@pytest.mark.parametrize("path", CONFIGS, ids=[p.stem for p in CONFIGS])
+def test_smoke_training_of_every_config(path: Path, smoke, tmp_path: Path):
+    cfg = smoke(path)
+    run = train(cfg, log_dir=tmp_path, progress_bar=False)
+    assert run == tmp_path / f"{cfg.name}_s{cfg.seed}"
+    assert (run / "model.zip").is_file() and (run / "vecnormalize.pkl").is_file()
+    half = cfg.n_timesteps // 2
+    ckpt = run / "checkpoints" / f"rl_model_{half}_steps.zip"
+    assert ckpt.is_file() and find_vecnormalize(ckpt) is not None
+    evals = np.load(run / "eval" / "evaluations.npz")
+    assert list(evals["timesteps"]) == [half, cfg.n_timesteps]
+    assert evals["results"].shape == (2, cfg.eval_episodes)
+    assert any((run / "tb").rglob("events.out.tfevents.*"))
+    manifest = json.loads((run / "manifest.json").read_text())
+    assert manifest["num_timesteps"] == cfg.n_timesteps
+    assert manifest["residual"] == cfg.is_residual
+    seeds = manifest["seeds"]
+    assert all(0 <= s < TRAIN_SEED_LIMIT for s in seeds["training_envs"])
+    assert all(s >= EVAL_SEED_OFFSET for s in seeds["evaluation"])
+    assert manifest["config"]["run"]["env"] == cfg.env_id
+
+
+@pytest.mark.parametrize("name", ["ppo_flat", "sac_rough"])
+def test_save_and_load_reproduce_deterministic_actions(name: str, smoke, tmp_path: Path):
+    cfg = smoke(CONFIG_DIR / f"{name}.yaml", timesteps=1024)
+    model, env, _ = build(cfg, tmp_path, tensorboard=False)
+    model.learn(cfg.n_timesteps)
+    assert isinstance(env, VecNormalize) and env.obs_rms.count > 100
+    obs = np.stack([env.get_original_obs()] + [env.unnormalize_obs(env.reset())] * 1)
+    obs = obs.reshape(-1, obs.shape[-1])
+    rng = np.random.default_rng(0)
+    obs = np.concatenate([obs, obs + rng.normal(0, 0.05, obs.shape).astype(np.float32)])
+    before = np.stack([model.predict(env.normalize_obs(o), deterministic=True)[0] for o in obs])
+    save(model, tmp_path / "model.zip")
+    loaded = TrainedPolicy(tmp_path / "model.zip", algo=cfg.algo)
+    after = np.stack([loaded(o) for o in obs])
+    np.testing.assert_array_equal(before, after)
+    assert np.ptp(before) > 0  # the actions depend on the observation
+
+
+def test_resume_from_checkpoint_continues_the_run(smoke, tmp_path: Path):
+    cfg = smoke(CONFIG_DIR / "ppo_stairs.yaml", timesteps=2048)
+    run = train(cfg, log_dir=tmp_path, progress_bar=False)
+    ckpt = run / "checkpoints" / "rl_model_1024_steps.zip"
+    stats_at_ckpt = load_vecnormalize(find_vecnormalize(ckpt)).obs_rms.count
+    final_before = (run / "model.zip").stat().st_mtime_ns
+    resumed = train(cfg, log_dir=None, resume=ckpt, progress_bar=False)
+    assert resumed == run
+    manifest = json.loads((run / "manifest.json").read_text())
+    assert manifest["resumed_from"] == [str(ckpt)]
+    assert manifest["num_timesteps"] == cfg.n_timesteps
+    assert (run / "model.zip").stat().st_mtime_ns > final_before
+    # the normalisation statistics continued from the checkpoint's (not from scratch)
+    stats_end = load_vecnormalize(run / "vecnormalize.pkl").obs_rms.count
+    assert stats_end == pytest.approx(stats_at_ckpt + 1024, abs=2)
+    # the evaluation history and the training-episode logs before the checkpoint are kept
+    evals = np.load(run / "eval" / "evaluations.npz")
+    assert list(evals["timesteps"]) == [1024, cfg.n_timesteps]
+    assert any((run / "monitor").glob("*.monitor.csv"))
+    assert any((run / "monitor" / "resume1").glob("*.monitor.csv"))
+
+
+def test_periodic_evaluation_uses_the_same_held_out_courses(smoke, tmp_path: Path):
+    # a frozen agent (no learning, no normalisation updates) must score identically each time
+    cfg = smoke(CONFIG_DIR / "ppo_rough.yaml", timesteps=1536)
+    cfg.hyperparams.update(learning_rate=0.0, normalize=False)
+    cfg.eval_freq, cfg.eval_episodes = 512, 3
+    run = train(cfg, log_dir=tmp_path, progress_bar=False, tensorboard=False)
+    results = np.load(run / "eval" / "evaluations.npz")["results"]
+    assert results.shape == (3, 3)
+    np.testing.assert_array_equal(results[0], results[1])
+    np.testing.assert_array_equal(results[0], results[2])
+    assert len(set(results[0])) > 1  # three different courses, not one course three times
+
+
+def test_cli_train_with_overrides(tmp_path: Path, capsys):
+    cfg = CONFIG_DIR / "sac_flat.yaml"
+    argv = ["train", str(cfg), "--timesteps", "600", "--seed", "4", "--log-dir", str(tmp_path)]
+    argv += ["--no-progress", "--hyperparams", "n_envs=2", "learning_starts=200"]
+    argv += ["batch_size=32", "train_freq=16", "env_kwargs={max_episode_steps: 100}"]
+    assert main(argv) == 0
+    run = tmp_path / "sac_flat_s4"
+    assert str(run) in capsys.readouterr().out
+    manifest = json.loads((run / "manifest.json").read_text())
+    assert manifest["seeds"]["training_envs"] == [4, 5]
+    assert manifest["num_timesteps"] >= 600  # whole vec-env steps: SB3 may overshoot by n_envs
+    assert load_config(cfg).n_timesteps > 600  # the file itself is untouched
+
+
+def test_rl_zoo3_reads_our_configs(tmp_path: Path):
+    pytest.importorskip("rl_zoo3")
+    cmd = [sys.executable, "-m", "rl_zoo3.train", "--algo", "ppo"]
+    cmd += ["--env", "roughwalk/CompassGaitRough-v0", "--gym-packages", "envs"]
+    cmd += ["--conf-file", str(CONFIG_DIR / "ppo_rough.yaml"), "-n", "256", "--seed", "1"]
+    cmd += ["-params", "n_envs:2", "n_steps:64", "batch_size:64", "n_epochs:1"]
+    cmd += ["--eval-freq", "-1", "--log-folder", str(tmp_path)]
+    out = subprocess.run(cmd, capture_output=True, text=True, timeout=300)
+    assert out.returncode == 0, out.stderr[-2000:]
+    assert "'difficulty': 1.0" in out.stdout  # env_kwargs of the file were used
+    saved = list(tmp_path.rglob("roughwalk-CompassGaitRough-v0.zip"))
+    assert len(saved) == 1
+    assert list(tmp_path.rglob("vecnormalize.pkl"))
+    # and roughwalk evaluate reads the model with rl-zoo3's saved settings
+    from agents.evaluate import evaluate
+
+    ev = evaluate(str(saved[0]), None, episodes=1, seed=0, env_kwargs={"max_episode_steps": 50})
+    assert ev.env_id == "roughwalk/CompassGaitRough-v0" and ev.episodes[0].steps <= 50
+
+
+@pytest.mark.parametrize(
+    ("name", "kind"), [("ppo_flat", "native"), ("ppo_residual_flat", "subproc")]
+)
+def test_other_vectorisations(name: str, kind: str, smoke, tmp_path: Path):
+    cfg = smoke(CONFIG_DIR / f"{name}.yaml", timesteps=512)
+    cfg.vec_env = kind
+    run = train(cfg, log_dir=tmp_path, progress_bar=False, tensorboard=False)
+    assert json.loads((run / "manifest.json").read_text())["num_timesteps"] == 512
+    assert any((run / "monitor").glob("*.monitor.csv"))
+
+
+def test_native_vec_env_refuses_env_wrappers():
+    from agents.config import ConfigError
+
+    with pytest.raises(ConfigError, match="run.vec_env = 'native' cannot apply env_wrapper"):
+        load_config(CONFIG_DIR / "sac_residual_rough.yaml", run_overrides={"vec_env": "native"})
+
+
+def test_same_seed_same_agent(smoke, tmp_path: Path):
+    import torch
+
+    cfg = smoke(CONFIG_DIR / "ppo_rough.yaml", timesteps=512)
+    runs = [train(cfg, log_dir=tmp_path / d, progress_bar=False, tensorboard=False) for d in "ab"]
+    params = [TrainedPolicy(r / "model.zip").model.policy.state_dict() for r in runs]
+    assert all(torch.equal(params[0][k], params[1][k]) for k in params[0])
+    other = load_config(cfg.path, cfg.hyperparams, {"seed": 1, "eval_freq": 0})
+    run_c = train(other, log_dir=tmp_path / "c", progress_bar=False, tensorboard=False)
+    params_c = TrainedPolicy(run_c / "model.zip").model.policy.state_dict()
+    assert not all(torch.equal(params[0][k], params_c[k]) for k in params[0])
