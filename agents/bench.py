@@ -227,10 +227,10 @@ def env_section(args: argparse.Namespace) -> list[Row]:
 
 
 def controller_section(args: argparse.Namespace) -> list[Row]:
-    """Transverse controller of the paper robot on flat ground: one footstep's jump-Riccati
-    solve at h = 3 (the paper: about 0.5 s in MATLAB), the linearisation plus solve, the
-    planner's replanning call, and one control tick (observer update plus feedback law).
-    Medians of repeated calls."""
+    """Transverse controller of the paper robot: one footstep's jump-Riccati solve at h = 3
+    (the paper: about 0.5 s in MATLAB) and the linearisation plus solve (flat-ground plan), the
+    planner's replanning call (flat, and per footstep of a state-feedback walk over the
+    paper's stairs), and one control tick (observer update plus feedback law). Medians."""
     from controllers.controller import (
         ControllerConfig,
         TransverseController,
@@ -257,6 +257,14 @@ def controller_section(args: argparse.Namespace) -> list[Row]:
         t0 = time.perf_counter()
         prev = ctrl.planner.plan(ctrl.terrain, (gait.q, gait.qd), (0.0, 0.0), 4, prev)
         plan_t.append(time.perf_counter() - t0)
+    # replanning at every footstep of a walk over the paper's stairs (state feedback)
+    from envs.params import CONFIG_DIR
+    from envs.terrain import Terrain
+
+    stairs = Terrain.from_yaml(CONFIG_DIR / "terrains" / "paper_stairs.yaml")
+    walker = TransverseController("paper", stairs, ControllerConfig(horizon=3))
+    out = walker.rollout(gait.q, gait.qd, 8.0 if args.quick else 12.0, dt=0.005)
+    stairs_plan = [r.plan_time for r in out["records"] if r.plan_time > 0][1:]
     obs = HighGainObserver(ctrl.robot, 0.005, 0.02)
     obs.reset(gait.q, gait.qd)
     x, P, n = obs.x, ctrl.P, 20000 if not args.quick else 2000
@@ -274,14 +282,82 @@ def controller_section(args: argparse.Namespace) -> list[Row]:
         ("Riccati solve, one footstep, h = 3", f"{np.median(ric) * 1e3:.3f}", "ms"),
         ("linearisation + Riccati, one footstep", f"{np.median(full) * 1e3:.2f}", "ms"),
         ("replanning (planner, 4 steps, flat)", f"{np.median(plan_t) * 1e3:.1f}", "ms"),
+        (
+            f"replanning per footstep, paper stairs walk ({len(stairs_plan)} steps"
+            + (f", {out['failure']}" if out["failure"] else "")
+            + ")",
+            f"{np.median(stairs_plan) * 1e3:.1f}" if stairs_plan else "-",
+            "ms",
+        ),
         ("control tick (observer + feedback law)", f"{tick * 1e6:.2f}", "us"),
     ]
+
+
+def _replanning_walk(planner, terrain, footsteps: int, perturb: bool, seed: int):
+    """Replan 4 steps at every footstep of a walk from the periodic gait's post-impact state,
+    following each plan's first step; with ``perturb`` the next start state is moved off the
+    plan (``q1`` by up to 0.01 rad, each velocity by up to 5 %). Returns the solve times after
+    the first call [s] and whether all footsteps were planned."""
+    from controllers.planner import PlanningError
+
+    rng = np.random.default_rng(seed)
+    gait = planner.periodic_gait()
+    state, stance, prev, times = (gait.q, gait.qd), (0.0, 0.0), None, []
+    for k in range(footsteps):
+        try:
+            plan = planner.plan(terrain, state, stance, horizon=4, previous_plan=prev)
+        except PlanningError:
+            return times, False
+        if k > 0:
+            times.append(plan.solve_time)
+        q, qd = plan[0].post_impact_state()
+        if perturb:
+            q = q + np.array([0.01 * rng.uniform(-1.0, 1.0), 0.0])
+            qd = qd * (1.0 + 0.05 * rng.uniform(-1.0, 1.0, 2))
+        state, stance, prev = (q, qd), plan[0].foothold, plan
+    return times, True
+
+
+def planner_section(args: argparse.Namespace) -> list[Row]:
+    """Gait planner of the paper robot: replanning time per footstep (4-step horizon, 15
+    footsteps; median over the footsteps of all courses) from the planned post-impact state and
+    from a perturbed one, and the share of random-block courses planned to the end."""
+    from controllers.planner import GaitPlanner
+    from envs.params import CONFIG_DIR
+    from envs.terrain import Terrain
+
+    seeds = 2 if args.quick else 8
+    courses = {
+        "flat": [Terrain.flat()],
+        "paper stairs": [Terrain.from_yaml(CONFIG_DIR / "terrains" / "paper_stairs.yaml")],
+        "stairs up 3 x 1 cm": [Terrain.staircase(0.4, 3, 0.3, 0.01)],
+    }
+    for h in (0.005, 0.01):
+        courses[f"random blocks +-{h * 1e3:.0f} mm, 0.15-0.3 m"] = [
+            Terrain.random_blocks(s, 0.3, 3.0, (0.15, 0.3), (-h, h)) for s in range(seeds)
+        ]
+    rows: list[Row] = []
+    planner = GaitPlanner("paper")
+    for name, terrains in courses.items():
+        for perturb in (False, True):
+            times, ok = [], 0
+            for i, terrain in enumerate(terrains):
+                t, good = _replanning_walk(planner, terrain, 15, perturb, seed=i)
+                times += t
+                ok += good
+            label = f"replanning per footstep, {name}" + (", perturbed" if perturb else "")
+            if len(terrains) > 1:
+                label += f" ({ok}/{len(terrains)} courses planned)"
+            value = f"{np.median(times) * 1e3:.1f}" if times else "-"
+            rows.append((label, value, "ms"))
+    return rows
 
 
 SECTIONS: list[tuple[str, Section]] = [
     ("simulator", simulator_section),
     ("environment", env_section),
     ("controller", controller_section),
+    ("planner", planner_section),
 ]
 
 

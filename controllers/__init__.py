@@ -1,0 +1,34 @@
+"""roughwalk controllers: Bezier virtual constraints, reduced dynamics, gait planning,
+transverse linearization, jump-Riccati receding-horizon control, observer, reference policy."""
+
+# Bezier constraints, footsteps and gait planning; transverse-linearization controller,
+# observer and reference policy
+from .bezier import BezierConstraint, bernstein_basis, bezier
+from .controller import ControllerConfig, PDController, TransverseController
+from .footsteps import FootholdRules, TerrainMap
+from .observer import HighGainObserver
+from .planner import GaitPlanner, PeriodicGait, Plan, PlannerConfig, PlanningError, StepPlan
+from .policy import PDPolicy, ReferencePolicy, make_reference_policy
+from .riccati import solve_jump_riccati
+
+__all__ = [
+    "BezierConstraint",
+    "FootholdRules",
+    "GaitPlanner",
+    "PeriodicGait",
+    "Plan",
+    "PlannerConfig",
+    "PlanningError",
+    "StepPlan",
+    "TerrainMap",
+    "bernstein_basis",
+    "bezier",
+    "ControllerConfig",
+    "HighGainObserver",
+    "PDController",
+    "PDPolicy",
+    "ReferencePolicy",
+    "TransverseController",
+    "make_reference_policy",
+    "solve_jump_riccati",
+]

@@ -1,0 +1,169 @@
+"""Bezier polynomials (Bernstein form) and Bezier virtual constraints ``q1 = phi(theta)``.
+
+A Bezier polynomial of order ``M`` with coefficients ``a_0 .. a_M`` is
+``b(s) = sum_k a_k C(M, k) s^k (1 - s)^(M - k)`` for ``s`` in ``[0, 1]``. A virtual constraint
+of one step maps the phase ``theta`` (the stance-leg angle ``q2``) to ``s`` with
+``s = (theta - theta_plus) / (theta_minus - theta_plus)``, so that ``phi(theta_plus) = a_0`` and
+``phi(theta_minus) = a_M``. Everything is vectorised over ``s`` (and ``theta``); the polynomial is
+evaluated as it stands outside ``[0, 1]`` (smooth extrapolation).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from functools import lru_cache
+
+import numpy as np
+from scipy.special import comb
+
+__all__ = [
+    "BezierConstraint",
+    "bernstein_basis",
+    "bezier",
+    "bezier_derivative_coeffs",
+]
+
+
+@lru_cache(maxsize=32)
+def _binomials(order: int) -> np.ndarray:
+    return comb(order, np.arange(order + 1), exact=False)
+
+
+def bernstein_basis(order: int, s: np.ndarray | float, deriv: int = 0) -> np.ndarray:
+    """Bernstein basis (or its ``deriv``-th derivative in ``s``) as a matrix.
+
+    Args:
+        order: polynomial order ``M`` >= 0.
+        s: evaluation points (any shape).
+        deriv: derivative order (0, 1, 2, ...).
+
+    Returns:
+        Array of shape ``s.shape + (M + 1,)``: ``b(s) = basis @ coeffs``.
+    """
+    if int(order) != order or order < 0:
+        raise ValueError(f"Bezier order = {order!r}; allowed: integer >= 0")
+    if int(deriv) != deriv or deriv < 0:
+        raise ValueError(f"Bezier derivative order = {deriv!r}; allowed: integer >= 0")
+    order, deriv = int(order), int(deriv)
+    s = np.asarray(s, dtype=np.float64)
+    out = np.zeros(s.shape + (order + 1,))
+    if deriv > order:
+        return out
+    m = order - deriv
+    k = np.arange(m + 1)
+    sb = s[..., None]
+    low = _binomials(m) * sb**k * (1.0 - sb) ** (m - k)  # basis of order m
+    # d^r/ds^r b(s) = M!/(M-r)! sum_k (Delta^r a)_k B_{k,M-r}(s); Delta^r a_k = sum_i (-1)^(r-i)
+    # C(r, i) a_{k+i}, so the basis of b^(r) w.r.t. a_j collects the terms with k + i = j.
+    scale = 1.0
+    for i in range(deriv):
+        scale *= order - i
+    for i in range(deriv + 1):
+        w = scale * (-1.0) ** (deriv - i) * comb(deriv, i, exact=False)
+        out[..., i : i + m + 1] += w * low
+    return out
+
+
+def bezier(coeffs: np.ndarray, s: np.ndarray | float, deriv: int = 0) -> np.ndarray | float:
+    """Evaluate a Bezier polynomial (or a derivative in ``s``) at ``s``.
+
+    Args:
+        coeffs: coefficients, shape ``(M + 1,)`` or a batch ``(K, M + 1)``.
+        s: evaluation points (any shape).
+        deriv: derivative order in ``s``.
+
+    Returns:
+        Shape ``s.shape`` for one polynomial, ``(K,) + s.shape`` for a batch; a float for a
+        scalar ``s`` and a single polynomial.
+    """
+    a = np.asarray(coeffs, dtype=np.float64)
+    if a.ndim not in (1, 2) or a.shape[-1] < 1:
+        raise ValueError(f"Bezier coeffs must have shape (M+1,) or (K, M+1), got {a.shape}")
+    basis = bernstein_basis(a.shape[-1] - 1, s, deriv)
+    out = basis @ a.T if a.ndim == 2 else basis @ a
+    if a.ndim == 2:
+        out = np.moveaxis(out, -1, 0)
+    return float(out) if np.ndim(out) == 0 else out
+
+
+def bezier_derivative_coeffs(coeffs: np.ndarray) -> np.ndarray:
+    """Coefficients (order ``M - 1``) of ``d b / d s``: ``M (a_{k+1} - a_k)``."""
+    a = np.asarray(coeffs, dtype=np.float64)
+    return (a.shape[-1] - 1) * np.diff(a, axis=-1)
+
+
+@dataclass(frozen=True)
+class BezierConstraint:
+    """One step's virtual constraint ``q1 = phi(theta)``, a Bezier polynomial in ``theta``.
+
+    Attributes:
+        coeffs: Bezier coefficients ``a_0 .. a_M`` [rad], shape ``(M + 1,)``.
+        theta_plus: phase at the start of the step (post-impact ``q2``) [rad].
+        theta_minus: phase at the planned impact (pre-impact ``q2``) [rad], ``> theta_plus``.
+    """
+
+    coeffs: np.ndarray
+    theta_plus: float
+    theta_minus: float
+
+    def __post_init__(self) -> None:
+        a = np.array(self.coeffs, dtype=np.float64)
+        if a.ndim != 1 or a.size < 2 or not np.all(np.isfinite(a)):
+            raise ValueError(f"BezierConstraint.coeffs must be finite, shape (M+1,) M>=1: {a!r}")
+        tp, tm = float(self.theta_plus), float(self.theta_minus)
+        if not (np.isfinite(tp) and np.isfinite(tm) and tm > tp):
+            raise ValueError(
+                f"BezierConstraint: theta_minus = {tm!r} must be finite and > theta_plus = {tp!r}"
+            )
+        a.flags.writeable = False
+        object.__setattr__(self, "coeffs", a)
+        object.__setattr__(self, "theta_plus", tp)
+        object.__setattr__(self, "theta_minus", tm)
+
+    @property
+    def order(self) -> int:
+        """Polynomial order ``M``."""
+        return self.coeffs.size - 1
+
+    @property
+    def span(self) -> float:
+        """``theta_minus - theta_plus`` [rad]."""
+        return self.theta_minus - self.theta_plus
+
+    def s(self, theta: np.ndarray | float) -> np.ndarray | float:
+        """Normalised phase ``(theta - theta_plus) / (theta_minus - theta_plus)``."""
+        return (np.asarray(theta, dtype=np.float64) - self.theta_plus) / self.span
+
+    def phi(self, theta: np.ndarray | float) -> np.ndarray | float:
+        """``phi(theta)`` [rad]."""
+        return bezier(self.coeffs, self.s(theta))
+
+    def dphi(self, theta: np.ndarray | float) -> np.ndarray | float:
+        """``d phi / d theta`` [-]."""
+        return bezier(self.coeffs, self.s(theta), 1) / self.span
+
+    def ddphi(self, theta: np.ndarray | float) -> np.ndarray | float:
+        """``d^2 phi / d theta^2`` [1/rad]."""
+        return bezier(self.coeffs, self.s(theta), 2) / self.span**2
+
+    def derivatives(self, theta: np.ndarray | float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """``(phi, phi', phi'')`` at ``theta`` in one pass."""
+        s = self.s(theta)
+        basis = [bernstein_basis(self.order, s, d) for d in range(3)]
+        return (
+            basis[0] @ self.coeffs,
+            basis[1] @ self.coeffs / self.span,
+            basis[2] @ self.coeffs / self.span**2,
+        )
+
+    @staticmethod
+    def second_coeff(a0: float, slope: float, theta_plus: float, theta_minus: float, order: int):
+        """``a_1`` that gives ``phi'(theta_plus) = slope`` (impact invariance)."""
+        return a0 + slope * (theta_minus - theta_plus) / order
+
+    @staticmethod
+    def penultimate_coeff(
+        a_last: float, slope: float, theta_plus: float, theta_minus: float, order: int
+    ):
+        """``a_{M-1}`` that gives ``phi'(theta_minus) = slope``."""
+        return a_last - slope * (theta_minus - theta_plus) / order

@@ -1,0 +1,235 @@
+"""Footstep selection from a terrain map ahead of the robot.
+
+The map is either the true :class:`envs.terrain.Terrain` or heights sampled by a terrain scanner
+(:meth:`TerrainMap.from_scan`). Footholds keep a margin from vertical faces (stair edges, block
+borders) and kinks, give step lengths within bounds, and lie within the reach of the legs
+(inter-leg angle at touchdown within bounds).
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+import numpy as np
+from numba import njit
+
+from envs.terrain import Terrain, as_terrain, terrain_height
+
+__all__ = ["FootholdRules", "TerrainMap", "candidate_footholds", "touchdown_configuration"]
+
+
+@njit(cache=True, error_model="numpy")
+def _heights(tx, ty, x):
+    out = np.empty(x.size)
+    n = tx.size
+    for i in range(x.size):
+        out[i] = terrain_height(tx, ty, n, x[i])
+    return out
+
+
+class TerrainMap:
+    """Terrain as the planner sees it: vectorised heights and the features to keep away from.
+
+    Args:
+        terrain: a :class:`Terrain` (or a spec dict / kind name).
+    """
+
+    def __init__(self, terrain: Terrain | dict | str):
+        self.terrain = as_terrain(terrain)
+        self.xs, self.ys = self.terrain.arrays()
+        self.features = self.terrain.edges()
+        self.faces = self.terrain.vertical_faces()
+
+    @classmethod
+    def from_scan(
+        cls, xs: Sequence[float], heights: Sequence[float], jump: float = 1e-3
+    ) -> TerrainMap:
+        """Map from scanned heights ``heights[k]`` [m] at increasing positions ``xs[k]`` [m].
+
+        Between samples whose heights differ by more than ``jump`` [m] a vertical face is placed
+        half-way; elsewhere the ground is linear between samples.
+        """
+        x = np.asarray(xs, dtype=np.float64)
+        h = np.asarray(heights, dtype=np.float64)
+        if x.ndim != 1 or x.shape != h.shape or x.size < 2:
+            raise ValueError("terrain scan: xs and heights must be 1-D of equal length >= 2")
+        if not (np.all(np.isfinite(x)) and np.all(np.isfinite(h))):
+            raise ValueError("terrain scan: xs and heights must be finite (no NaN)")
+        if np.any(np.diff(x) <= 0):
+            raise ValueError("terrain scan: xs must be strictly increasing")
+        px, py = [x[0]], [h[0]]
+        for k in range(1, x.size):
+            if abs(h[k] - h[k - 1]) > jump:
+                xm = 0.5 * (x[k - 1] + x[k])
+                px += [xm, xm]
+                py += [h[k - 1], h[k]]
+            px.append(x[k])
+            py.append(h[k])
+        return cls(Terrain.from_points(px, py))
+
+    @classmethod
+    def coerce(cls, terrain: TerrainMap | Terrain | dict | str | tuple) -> TerrainMap:
+        """A :class:`TerrainMap` from a map, a terrain, a spec, or a scan ``(xs, heights)``."""
+        if isinstance(terrain, TerrainMap):
+            return terrain
+        if isinstance(terrain, tuple) and len(terrain) == 2:
+            return cls.from_scan(*terrain)
+        return cls(terrain)
+
+    def height(self, x: np.ndarray | float) -> np.ndarray | float:
+        """Ground height [m] at ``x`` [m] (the upper height on a vertical face)."""
+        if np.ndim(x) == 0:
+            return float(terrain_height(self.xs, self.ys, self.xs.size, float(x)))
+        xa = np.ascontiguousarray(x, dtype=np.float64)
+        return _heights(self.xs, self.ys, xa.ravel()).reshape(xa.shape)
+
+    def distance_to_feature(self, x: np.ndarray) -> np.ndarray:
+        """Distance [m] from each ``x`` to the nearest face or kink (``inf`` if none)."""
+        x = np.asarray(x, dtype=np.float64)
+        if self.features.size == 0:
+            return np.full(x.shape, np.inf)
+        i = np.searchsorted(self.features, x)
+        left = self.features[np.clip(i - 1, 0, self.features.size - 1)]
+        right = self.features[np.clip(i, 0, self.features.size - 1)]
+        return np.minimum(np.abs(x - left), np.abs(right - x))
+
+    def faces_between(self, x0: float, x1: float) -> list[tuple[float, float]]:
+        """Vertical faces strictly between ``x0`` and ``x1`` as ``(x, top height)``."""
+        return [(x, max(a, b)) for x, a, b in self.faces if x0 < x < x1]
+
+
+@dataclass(frozen=True)
+class FootholdRules:
+    """Geometric rules for footholds (lengths in m, angles in rad).
+
+    Attributes:
+        step_length: preferred horizontal step length [m].
+        step_min, step_max: bounds on the horizontal step length [m].
+        edge_margin: least distance of a foothold from a face or kink [m].
+        q1_min, q1_max: bounds on the inter-leg angle at touchdown [rad].
+        max_rise, max_drop: largest height gain / loss of one step [m].
+        resolution: spacing of the candidate footholds [m].
+        drop_margin: extra distance per metre of drop between a foothold and a step-down riser
+            behind it, so that the next swing's retracted foot clears the riser [m/m].
+        rise_margin: extra distance per metre of rise between a foothold and a step-up riser
+            ahead of it, so that the next swing foot clears the riser [m/m].
+    """
+
+    step_length: float
+    step_min: float
+    step_max: float
+    edge_margin: float
+    q1_min: float
+    q1_max: float
+    max_rise: float
+    max_drop: float
+    resolution: float = 0.002
+    drop_margin: float = 4.0
+    rise_margin: float = 4.0
+
+    def __post_init__(self) -> None:
+        for name in ("step_length", "step_min", "step_max", "q1_min", "q1_max", "resolution"):
+            v = getattr(self, name)
+            if not (math.isfinite(v) and v > 0):
+                raise ValueError(f"FootholdRules.{name} = {v!r}; allowed: finite > 0")
+        for name in ("edge_margin", "max_rise", "max_drop", "drop_margin", "rise_margin"):
+            v = getattr(self, name)
+            if not (math.isfinite(v) and v >= 0):
+                raise ValueError(f"FootholdRules.{name} = {v!r}; allowed: finite >= 0")
+        if not self.step_min <= self.step_length <= self.step_max:
+            raise ValueError(
+                f"FootholdRules: need step_min <= step_length <= step_max, got "
+                f"{self.step_min}, {self.step_length}, {self.step_max}"
+            )
+        if not self.q1_min < self.q1_max < math.pi:
+            raise ValueError(
+                f"FootholdRules: need q1_min < q1_max < pi, got {self.q1_min}, {self.q1_max}"
+            )
+
+
+def touchdown_configuration(
+    dx: np.ndarray | float, dh: np.ndarray | float, l: float
+) -> tuple[np.ndarray | float, np.ndarray | float]:
+    """Pre-impact ``(q1, q2)`` [rad] that puts the swing foot at ``(dx, dh)`` [m] from the stance
+    foot with both legs at full length ``l`` [m]: ``l (sin q2 - sin(q2 - q1)) = dx``,
+    ``l (cos q2 - cos(q2 - q1)) = dh``. ``NaN`` where the foothold is out of reach."""
+    dx, dh = np.asarray(dx, dtype=np.float64), np.asarray(dh, dtype=np.float64)
+    chord = np.hypot(dx, dh) / (2.0 * l)
+    with np.errstate(invalid="ignore"):
+        q1 = 2.0 * np.arcsin(np.where(chord <= 1.0, chord, np.nan))
+    q2 = np.arctan2(-dh, dx) + 0.5 * q1
+    if q1.ndim == 0:
+        return float(q1), float(q2)
+    return q1, q2
+
+
+def candidate_footholds(
+    tmap: TerrainMap,
+    stance: tuple[float, float],
+    rules: FootholdRules,
+    l: float,
+    theta_target: float | None = None,
+    sigma_target: float | None = None,
+) -> tuple[np.ndarray, np.ndarray, str]:
+    """Admissible footholds for the next step, best first.
+
+    Args:
+        tmap: terrain map.
+        stance: stance-foot position ``(x, y)`` [m].
+        rules: foothold rules.
+        l: leg length [m].
+        theta_target: preferred stance-leg angle at touchdown [rad]; when given, candidates
+            are ranked by how close their touchdown ``q2`` is to it (this keeps the phase range
+            of every step near the nominal one: longer steps after a step down), else by the
+            distance from the preferred step length.
+        sigma_target: preferred swing-leg angle ``q2 - q1`` at touchdown [rad] (the next
+            step's start phase), added to the ranking with ``theta_target``.
+
+    Returns:
+        ``(x, y, reason)``: candidate foothold coordinates [m], best first (empty if none),
+        and why candidates were rejected when empty.
+    """
+    x0, y0 = stance
+    n = int(math.floor((rules.step_max - rules.step_min) / rules.resolution)) + 1
+    x = x0 + rules.step_min + rules.resolution * np.arange(n)
+    y = tmap.height(x)
+    dh = y - y0
+    q1, q2 = touchdown_configuration(x - x0, dh, l)
+    ok_edge = tmap.distance_to_feature(x) >= rules.edge_margin
+    for xf, ya, yb in tmap.faces:
+        if x0 < xf and ya > yb:  # a step down between the stance foot and the candidates
+            ok_edge &= (x <= xf) | (x - xf >= rules.edge_margin + rules.drop_margin * (ya - yb))
+        if 0 < yb - ya <= rules.max_rise:  # a step up ahead of the candidates (not a wall)
+            ok_edge &= (x >= xf) | (xf - x >= rules.edge_margin + rules.rise_margin * (yb - ya))
+    ok_h = (dh <= rules.max_rise) & (dh >= -rules.max_drop)
+    with np.errstate(invalid="ignore"):
+        ok_reach = (q1 >= rules.q1_min) & (q1 <= rules.q1_max)
+    ok = ok_edge & ok_h & ok_reach
+    if not np.any(ok):
+        reasons = []
+        if not np.any(ok_edge):
+            reasons.append(f"no ground {rules.edge_margin} m away from an edge")
+        if not np.any(ok_h & ok_edge):
+            reasons.append(
+                f"height change outside [-{rules.max_drop}, {rules.max_rise}] m "
+                f"(range seen {dh.min():.3g} .. {dh.max():.3g} m)"
+            )
+        if not np.any(ok_reach & ok_edge):
+            reasons.append(f"inter-leg angle at touchdown outside [{rules.q1_min}, {rules.q1_max}]")
+        return (
+            np.zeros(0),
+            np.zeros(0),
+            "no admissible foothold within step length "
+            f"[{rules.step_min}, {rules.step_max}] m: " + "; ".join(reasons or ["rules"]),
+        )
+    if theta_target is None:
+        score = np.abs(x - x0 - rules.step_length)
+    else:
+        score = np.abs(q2 - theta_target) + 0.1 * np.abs(x - x0 - rules.step_length) / l
+        if sigma_target is not None:
+            score = score + 2.0 * np.abs(q2 - q1 - sigma_target)
+    x, y, score = x[ok], y[ok], score[ok]
+    order = np.argsort(score, kind="stable")
+    return x[order], y[order], ""

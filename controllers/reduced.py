@@ -1,0 +1,231 @@
+"""Reduced (zero) dynamics along a virtual constraint, impact along constraints, and PFL terms.
+
+For one step with the constraint ``q1 = phi(theta)``, ``theta = q2``, the unactuated row of the
+equations of motion restricted to the constraint reads (control notes, section 2)
+
+    alpha(theta) theta_ddot + beta(theta) theta_dot^2 + gamma(theta) = 0,
+
+with ``alpha = M21 phi' + M22``, ``beta theta_dot^2 = M21 phi'' theta_dot^2 + [C(q, qd) qd]_2`` at
+``qd = [phi', 1] theta_dot`` (the Christoffel terms, taken from :func:`envs.model.coriolis`, which
+is quadratic in ``qd``) and ``gamma = G2``. Its integral is
+
+    theta_dot^2 = psi(theta, theta0) theta_dot0^2 + Gam(theta, theta0).
+
+Integrals are computed on a Chebyshev-Lobatto grid over the step (spectrally accurate for the
+smooth integrands of a Bezier constraint): :func:`phase_grid` makes the grid, and every function
+here is vectorised over it. All model quantities come from :mod:`envs.model`; ``P`` is
+``RobotParams.vector()``.
+"""
+
+from __future__ import annotations
+
+from functools import lru_cache
+
+import numpy as np
+from numpy.polynomial import chebyshev as cheb
+
+from envs import model
+
+__all__ = [
+    "ChebyshevSeries",
+    "cheb_nodes",
+    "cumulative_integral",
+    "impact_along_constraint",
+    "nominal_accelerations",
+    "nominal_input",
+    "pfl_terms",
+    "phase_grid",
+    "reduced_coefficients",
+    "reduced_integral",
+    "step_time",
+]
+
+
+# ---------------------------------------------------------------------------- Chebyshev grid
+@lru_cache(maxsize=16)
+def _cheb_matrices(n: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Nodes ``x`` (increasing, on [-1, 1]), values->coefficients matrix, cumulative integral."""
+    k = np.arange(n + 1)
+    x = -np.cos(np.pi * k / n)
+    vinv = np.linalg.inv(cheb.chebvander(x, n))
+    integ = cheb.chebint(np.eye(n + 1), lbnd=-1.0, axis=0)  # (n + 2, n + 1) coefficient map
+    q = cheb.chebvander(x, n + 1) @ integ @ vinv
+    for arr in (x, vinv, q):
+        arr.flags.writeable = False
+    return x, vinv, q
+
+
+def cheb_nodes(n: int) -> np.ndarray:
+    """``n + 1`` Chebyshev-Lobatto nodes on ``[-1, 1]`` in increasing order (``n >= 4``)."""
+    if int(n) != n or n < 4:
+        raise ValueError(f"grid size n = {n!r}; allowed: integer >= 4")
+    return _cheb_matrices(int(n))[0]
+
+
+def phase_grid(theta_a: float, theta_b: float, n: int) -> np.ndarray:
+    """Chebyshev-Lobatto grid of ``n + 1`` phases on ``[theta_a, theta_b]`` [rad], increasing."""
+    x = cheb_nodes(n)
+    return 0.5 * (theta_a + theta_b) + 0.5 * (theta_b - theta_a) * x
+
+
+def cumulative_integral(values: np.ndarray, theta_a: float, theta_b: float) -> np.ndarray:
+    """``int_{theta_a}^{theta_k} f`` at every node ``theta_k`` of :func:`phase_grid`.
+
+    Args:
+        values: ``f`` at the ``n + 1`` grid nodes along the last axis (batches allowed).
+        theta_a, theta_b: the grid's interval (scalars, or arrays broadcasting against
+            ``values[..., :1]`` for a batch of grids).
+    """
+    v = np.asarray(values, dtype=np.float64)
+    n = v.shape[-1] - 1
+    cheb_nodes(n)
+    q = _cheb_matrices(n)[2]
+    return 0.5 * (theta_b - theta_a) * (v @ q.T)
+
+
+class ChebyshevSeries:
+    """Interpolant of values given on a :func:`phase_grid`; callable at any ``theta``.
+
+    Inside ``[theta_a, theta_b]`` it is spectrally accurate; slightly outside, it extrapolates
+    the polynomial smoothly (use only a few percent of the interval outside).
+    """
+
+    def __init__(self, values: np.ndarray, theta_a: float, theta_b: float):
+        v = np.asarray(values, dtype=np.float64)
+        n = v.shape[-1] - 1
+        cheb_nodes(n)
+        self.theta_a, self.theta_b = float(theta_a), float(theta_b)
+        self.coef = v @ _cheb_matrices(n)[1].T
+
+    def _x(self, theta: np.ndarray | float) -> np.ndarray:
+        t = np.asarray(theta, dtype=np.float64)
+        return (2.0 * t - self.theta_a - self.theta_b) / (self.theta_b - self.theta_a)
+
+    def __call__(self, theta: np.ndarray | float) -> np.ndarray | float:
+        out = cheb.chebval(self._x(theta), self.coef)
+        return float(out) if np.ndim(out) == 0 else out
+
+    def derivative(self, theta: np.ndarray | float) -> np.ndarray | float:
+        """``d/dtheta`` of the interpolant."""
+        dc = cheb.chebder(self.coef) * 2.0 / (self.theta_b - self.theta_a)
+        out = cheb.chebval(self._x(theta), dc)
+        return float(out) if np.ndim(out) == 0 else out
+
+
+# ---------------------------------------------------------------------------- reduced dynamics
+def reduced_coefficients(
+    P: np.ndarray, phi: np.ndarray, theta: np.ndarray, dphi: np.ndarray, ddphi: np.ndarray
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """``alpha, beta, gamma`` of the reduced dynamics at ``q = (phi(theta), theta)``.
+
+    Args:
+        P: robot parameter vector.
+        phi, dphi, ddphi: ``phi(theta)`` [rad], ``phi'`` [-], ``phi''`` [1/rad].
+        theta: phase ``q2`` [rad].
+
+    Returns:
+        ``alpha`` [kg m^2], ``beta`` [kg m^2], ``gamma`` [N m], broadcast over the inputs.
+    """
+    _, m12, m22 = model.mass_matrix(P, phi)
+    alpha = m12 * dphi + m22
+    # [C(q, qd) qd]_2 is quadratic in qd, so its value at qd = [phi', 1] is the Christoffel sum
+    _, c2 = model.coriolis(P, phi, dphi, 1.0 + 0.0 * dphi)
+    beta = m12 * ddphi + c2
+    _, gamma = model.gravity(P, phi, theta)
+    return alpha, beta, gamma
+
+
+def reduced_integral(
+    theta: np.ndarray, alpha: np.ndarray, beta: np.ndarray, gamma: np.ndarray
+) -> tuple[np.ndarray, np.ndarray]:
+    """``psi(theta_k, theta_0)`` and ``Gam(theta_k, theta_0)`` on a :func:`phase_grid`.
+
+    ``theta_dot^2(theta_k) = psi_k theta_dot(theta_0)^2 + Gam_k`` for every solution of the
+    reduced dynamics. Arrays along the last axis (batches allowed); ``alpha`` must not vanish.
+    """
+    th = np.asarray(theta, dtype=np.float64)
+    a, b = th[..., :1], th[..., -1:]
+    k = cumulative_integral(2.0 * beta / alpha, a, b)
+    e = np.exp(k)  # 1 / psi(theta, theta_0)
+    hint = cumulative_integral(-2.0 * gamma / alpha * e, a, b)
+    psi = 1.0 / e
+    return psi, psi * hint
+
+
+def step_time(theta: np.ndarray, thetadot_sq: np.ndarray) -> np.ndarray:
+    """Time [s] to reach each grid phase from ``theta[0]``: ``int dtheta / theta_dot``.
+
+    ``thetadot_sq`` must be positive on the grid (raises ``ValueError`` otherwise).
+    """
+    f = np.asarray(thetadot_sq, dtype=np.float64)
+    if np.any(~(f > 0)):
+        raise ValueError("step_time: theta_dot^2 must be > 0 on the whole grid")
+    return cumulative_integral(1.0 / np.sqrt(f), theta[0], theta[-1])
+
+
+def nominal_accelerations(
+    alpha: np.ndarray,
+    beta: np.ndarray,
+    gamma: np.ndarray,
+    dphi: np.ndarray,
+    ddphi: np.ndarray,
+    thetadot_sq: np.ndarray,
+) -> tuple[np.ndarray, np.ndarray]:
+    """``(q1dd, q2dd)`` [rad/s^2] along the constraint from the reduced dynamics."""
+    thdd = -(beta * thetadot_sq + gamma) / alpha
+    return dphi * thdd + ddphi * thetadot_sq, thdd
+
+
+# ---------------------------------------------------------------------------- impact, PFL
+def impact_along_constraint(
+    P: np.ndarray, q1_minus: np.ndarray | float, dphi_minus: np.ndarray | float
+) -> tuple[np.ndarray | float, np.ndarray | float]:
+    """Impact on the constraint direction ``qd- = [phi'(theta-), 1] theta_dot-``.
+
+    Returns:
+        ``(delta, slope_plus)``: ``theta_dot+ = delta theta_dot-`` for the next step's phase,
+        and the post-impact velocity direction ``q1d+/q2d+``, which the next step's constraint
+        must have as ``phi'(theta+)`` for impact invariance.
+    """
+    d11, d12, d21, d22 = model.impact_velocity_matrix(P, q1_minus)
+    delta = d21 * dphi_minus + d22
+    return delta, (d11 * dphi_minus + d12) / delta
+
+
+def pfl_terms(
+    P: np.ndarray,
+    q1: np.ndarray | float,
+    q2: np.ndarray | float,
+    q1d: np.ndarray | float,
+    q2d: np.ndarray | float,
+    dphi: np.ndarray | float,
+    ddphi: np.ndarray | float,
+) -> tuple[np.ndarray | float, np.ndarray | float]:
+    """Partial feedback linearisation terms: ``y_ddot = N u + R`` for ``y = q1 - phi(q2)``.
+
+    ``u`` is in input units (hip torque ``kI ktau u``); ``R`` includes the hip friction at the
+    given ``q1d``. ``dphi, ddphi`` are ``phi', phi''`` evaluated at ``theta = q2``. The input that
+    gives ``y_ddot = v`` is ``u = (v - R) / N``.
+    """
+    q1dd0, q2dd0 = model.accelerations(P, q1, q2, q1d, q2d, 0.0)
+    r = q1dd0 - dphi * q2dd0 - ddphi * q2d * q2d
+    m11, m12, m22 = model.mass_matrix(P, q1)
+    det = m11 * m22 - m12 * m12
+    # response of qdd to a unit input: M^-1 [b, 0]
+    b = model.input_gain(P)
+    n = b * (m22 + dphi * m12) / det
+    return n, r
+
+
+def nominal_input(
+    P: np.ndarray,
+    phi: np.ndarray,
+    theta: np.ndarray,
+    dphi: np.ndarray,
+    ddphi: np.ndarray,
+    thetadot: np.ndarray,
+) -> np.ndarray:
+    """Input ``u`` [input units] that keeps the robot on the constraint (``y_ddot = 0``) at the
+    nominal state ``q = (phi, theta)``, ``qd = (phi' theta_dot, theta_dot)``; friction included."""
+    n, r = pfl_terms(P, phi, theta, dphi * thetadot, thetadot, dphi, ddphi)
+    return -r / n

@@ -1,0 +1,277 @@
+"""Finite-horizon jump-Riccati equation of the receding-horizon controller (paper Section 4).
+
+The linear impulsive system is a chain of smooth segments ``j = 0 .. S-1`` joined by jumps::
+
+    dz/ds = A(s) z + B(s) v            inside segment j, s in [s_j, s_j + L_j]
+    z(s_{j+1}+) = F_j z(s_j + L_j -)   between segment j and segment j+1
+
+with cost ``int w(s) (z'Qz + v'Rv) ds + sum_j z(jump_j -)' Q_j z(jump_j -)`` and the terminal
+constraint ``z(end) = 0``. The independent variable ``s`` is time in the paper; the transverse
+controller uses the phase variable ``theta`` instead (then ``A, B`` are divided by the nominal
+``theta_dot`` and ``w = 1/theta_dot``), which is why the weight ``w`` exists.
+
+The equation is solved in inverse form ``Z = P^-1`` (control notes, section 5), backwards::
+
+    -dZ/ds = -Z A' - A Z + B (w R)^-1 B' - w Z Q Z,     Z(end) = 0,
+    Z(jump_j -) = Q_j^-1 - Q_j^-1 F_j' (Z(jump_j +) + F_j Q_j^-1 F_j')^-1 F_j Q_j^-1,
+
+the Woodbury form of ``(F_j' Z+^-1 F_j + Q_j)^-1``, valid where ``Z+`` is singular. Integrated
+backwards the quadratic term only damps ``Z``, so there is no finite escape; the scheme is
+classical RK4 on a fixed grid per segment, with ``A, B, w`` sampled at the grid nodes and the
+midpoints (``2 n_j + 1`` samples per segment). The optimal feedback is
+``v = K z`` with ``K = -(w R)^-1 B' Z^-1``; see :func:`solve_jump_riccati`.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+import numpy as np
+from numba import njit
+
+_jit = njit(cache=True, error_model="numpy")
+
+
+@_jit
+def _rhs(Z, A, G, Qw, T, out):
+    """``out = -Z A' - A Z + G - Z Qw Z`` (``G = B (wR)^-1 B'``, ``Qw = w Q``); ``T`` scratch."""
+    n = Z.shape[0]
+    for i in range(n):  # T = Z Qw
+        for k in range(n):
+            acc = 0.0
+            for m in range(n):
+                acc += Z[i, m] * Qw[m, k]
+            T[i, k] = acc
+    for i in range(n):
+        for k in range(i, n):
+            az_ik = 0.0
+            az_ki = 0.0
+            zqz = 0.0
+            for m in range(n):
+                az_ik += A[i, m] * Z[m, k]
+                az_ki += A[k, m] * Z[m, i]
+                zqz += T[i, m] * Z[m, k]
+            v = -az_ki - az_ik + G[i, k] - zqz
+            out[i, k] = v
+            out[k, i] = v
+
+
+@_jit
+def _spd_inverse(Z):
+    """Inverse of a symmetric positive-definite matrix by Cholesky (raises if not SPD)."""
+    n = Z.shape[0]
+    L = np.linalg.cholesky(Z)
+    Li = np.linalg.solve(L, np.eye(n))
+    return Li.T @ Li
+
+
+@_jit
+def _solve_segments(A, G, Qw, ds, nsteps, offs, F, Qj_inv, Znodes, node_offs):
+    """Backward RK4 over all segments; ``Znodes`` receives ``Z`` at every grid node."""
+    S = nsteps.shape[0]
+    n = A.shape[1]
+    Z = np.zeros((n, n))
+    k1 = np.empty((n, n))
+    k2 = np.empty((n, n))
+    k3 = np.empty((n, n))
+    k4 = np.empty((n, n))
+    Zt = np.empty((n, n))
+    T = np.empty((n, n))
+    for j in range(S - 1, -1, -1):
+        if j < S - 1:
+            # jump from the start of segment j+1 back to the end of segment j (Woodbury)
+            Fj = F[j]
+            Qi = Qj_inv[j]
+            QiFt = Qi @ Fj.T
+            Mj = Z + Fj @ QiFt
+            X = np.linalg.solve(Mj, QiFt.T)  # (Z+ + F Qi F')^-1 F Qi
+            Z = Qi - QiFt @ X
+            Z = 0.5 * (Z + Z.T)
+            Z = np.ascontiguousarray(Z)
+        nj = nsteps[j]
+        h = ds[j]
+        o = offs[j]
+        no = node_offs[j]
+        Znodes[no + nj] = Z
+        for k in range(nj - 1, -1, -1):
+            i1 = o + 2 * k + 2
+            im = o + 2 * k + 1
+            i0 = o + 2 * k
+            _rhs(Z, A[i1], G[i1], Qw[i1], T, k1)
+            for a in range(n):
+                for b in range(n):
+                    Zt[a, b] = Z[a, b] + 0.5 * h * k1[a, b]
+            _rhs(Zt, A[im], G[im], Qw[im], T, k2)
+            for a in range(n):
+                for b in range(n):
+                    Zt[a, b] = Z[a, b] + 0.5 * h * k2[a, b]
+            _rhs(Zt, A[im], G[im], Qw[im], T, k3)
+            for a in range(n):
+                for b in range(n):
+                    Zt[a, b] = Z[a, b] + h * k3[a, b]
+            _rhs(Zt, A[i0], G[i0], Qw[i0], T, k4)
+            for a in range(n):
+                for b in range(n):
+                    Z[a, b] += (h / 6.0) * (k1[a, b] + 2.0 * k2[a, b] + 2.0 * k3[a, b] + k4[a, b])
+            Znodes[no + k] = Z
+    return Z
+
+
+@_jit
+def _prepare(B, w, R_inv, Q):
+    """Per sample ``G = B R^-1 B' / w`` and ``Qw = w Q``."""
+    N = B.shape[0]
+    n = B.shape[1]
+    m = B.shape[2]
+    G = np.empty((N, n, n))
+    Qw = np.empty((N, n, n))
+    BR = np.empty((n, m))
+    for i in range(N):
+        for a in range(n):
+            for c in range(m):
+                acc = 0.0
+                for d in range(m):
+                    acc += B[i, a, d] * R_inv[d, c]
+                BR[a, c] = acc
+        for a in range(n):
+            for b in range(n):
+                acc = 0.0
+                for c in range(m):
+                    acc += BR[a, c] * B[i, b, c]
+                G[i, a, b] = acc / w[i]
+                Qw[i, a, b] = w[i] * Q[a, b]
+    return G, Qw
+
+
+@_jit
+def _gains(Znodes, Bn, wn, R_inv):
+    """``K = -R^-1 B' Z^-1 / w`` and ``P = Z^-1`` at the nodes (``B`` and ``w`` at the nodes)."""
+    N = Znodes.shape[0]
+    n = Znodes.shape[1]
+    m = Bn.shape[2]
+    K = np.empty((N, m, n))
+    P = np.empty((N, n, n))
+    for i in range(N):
+        Pi = _spd_inverse(Znodes[i])
+        P[i] = Pi
+        K[i] = -(R_inv @ Bn[i].T @ Pi) / wn[i]
+    return K, P
+
+
+@dataclass
+class RiccatiSolution:
+    """Solution of the jump-Riccati equation on the grid nodes.
+
+    Attributes:
+        s: per segment, the node positions ``s_j + k L_j / n_j``, ``k = 0 .. n_j``.
+        Z: per segment, ``Z`` at the nodes, shape ``(n_j + 1, n, n)``.
+        K: gains ``v = K z`` at the nodes of the first ``gain_segments`` segments,
+            shape ``(n_j + 1, m, n)`` each.
+        P: ``Z^-1`` (the Lyapunov matrix of ``V = z' P z``) where ``K`` is given.
+    """
+
+    s: list[np.ndarray]
+    Z: list[np.ndarray]
+    K: list[np.ndarray]
+    P: list[np.ndarray]
+
+
+def solve_jump_riccati(
+    A: Sequence[np.ndarray],
+    B: Sequence[np.ndarray],
+    lengths: Sequence[float],
+    F: Sequence[np.ndarray],
+    Q: np.ndarray,
+    R: np.ndarray,
+    Qj: np.ndarray | Sequence[np.ndarray],
+    w: Sequence[np.ndarray] | None = None,
+    s0: float = 0.0,
+    gain_segments: int = 1,
+) -> RiccatiSolution:
+    """Solve the jump-Riccati equation backwards from ``Z(end) = 0``.
+
+    Args:
+        A: per segment ``j``, ``A`` sampled at ``2 n_j + 1`` equally spaced points (the RK4
+            nodes and midpoints) covering the segment, shape ``(2 n_j + 1, n, n)``.
+        B: per segment, ``B`` at the same points, shape ``(2 n_j + 1, n, m)``.
+        lengths: length ``L_j > 0`` of each segment in the independent variable.
+        F: the ``S - 1`` jump matrices, ``z+ = F_j z-`` between segments ``j`` and ``j+1``.
+        Q, R: running weights (``n x n`` positive semi-definite, ``m x m`` positive definite).
+        Qj: jump weight(s), positive definite ``n x n`` (one, or one per jump).
+        w: optional per-segment positive weight samples (default 1): the running cost is
+            ``w (z'Qz + v'Rv)``.
+        s0: position of the start of the first segment.
+        gain_segments: number of leading segments for which gains are returned (0 .. S).
+
+    Returns:
+        :class:`RiccatiSolution`. The feedback ``v = K z`` minimises the cost to go; with the
+        time-scaled form (``A = A_t / theta_dot``, ``B = B_t / theta_dot``, ``w = 1/theta_dot``)
+        ``K`` equals the time-domain gain ``-R^-1 B_t' Z^-1``.
+    """
+    S = len(A)
+    if S < 1 or len(B) != S or len(lengths) != S:
+        raise ValueError("solve_jump_riccati: A, B and lengths need one entry per segment (>= 1)")
+    if len(F) != S - 1:
+        raise ValueError(f"solve_jump_riccati: need {S - 1} jump matrices F, got {len(F)}")
+    if not 0 <= gain_segments <= S:
+        raise ValueError(f"solve_jump_riccati: gain_segments = {gain_segments}; allowed 0..{S}")
+    n = np.asarray(A[0]).shape[1]
+    nsteps = np.empty(S, dtype=np.int64)
+    for j in range(S):
+        ns = np.asarray(A[j]).shape[0]
+        if ns < 3 or ns % 2 == 0 or np.asarray(B[j]).shape[0] != ns:
+            raise ValueError(
+                f"solve_jump_riccati: segment {j} needs an odd number >= 3 of samples of A and B"
+            )
+        if not lengths[j] > 0:
+            raise ValueError(f"solve_jump_riccati: lengths[{j}] = {lengths[j]}; allowed > 0")
+        nsteps[j] = (ns - 1) // 2
+    Aall = np.ascontiguousarray(np.concatenate(A, axis=0), dtype=np.float64)
+    Ball = np.ascontiguousarray(np.concatenate(B, axis=0), dtype=np.float64)
+    if w is None:
+        wall = np.ones(Aall.shape[0])
+    else:
+        wall = np.ascontiguousarray(np.concatenate(w), dtype=np.float64)
+    Q = np.ascontiguousarray(Q, dtype=np.float64)
+    R = np.atleast_2d(np.asarray(R, dtype=np.float64))
+    if not (np.all(np.isfinite(Aall)) and np.all(np.isfinite(Ball)) and np.all(wall > 0)):
+        raise ValueError("solve_jump_riccati: A, B must be finite and w positive")
+    R_inv = np.linalg.inv(R)
+    Qj_list = [np.asarray(Qj, dtype=np.float64)] * (S - 1) if np.ndim(Qj) == 2 else list(Qj)
+    Qj_inv = np.zeros((max(S - 1, 1), n, n))
+    for j in range(S - 1):
+        Qj_inv[j] = np.linalg.inv(Qj_list[j])
+    Fall = np.zeros((max(S - 1, 1), n, n))
+    for j in range(S - 1):
+        Fall[j] = F[j]
+    if not np.all(np.isfinite(Fall)):
+        raise ValueError("solve_jump_riccati: jump matrices F must be finite")
+    offs = np.zeros(S, dtype=np.int64)
+    offs[1:] = np.cumsum(2 * nsteps + 1)[:-1]
+    node_offs = np.zeros(S, dtype=np.int64)
+    node_offs[1:] = np.cumsum(nsteps + 1)[:-1]
+    ds = np.asarray(lengths, dtype=np.float64) / nsteps
+    G, Qw = _prepare(Ball, wall, R_inv, Q)
+    Znodes = np.empty((int(np.sum(nsteps + 1)), n, n))
+    _solve_segments(Aall, G, Qw, ds, nsteps, offs, Fall, Qj_inv, Znodes, node_offs)
+    s_list, Z_list, K_list, P_list = [], [], [], []
+    start = float(s0)
+    for j in range(S):
+        nj = int(nsteps[j])
+        s_list.append(start + np.arange(nj + 1) * ds[j])
+        start += float(lengths[j])
+        Z_list.append(Znodes[node_offs[j] : node_offs[j] + nj + 1])
+        if j < gain_segments:
+            Bn = Ball[offs[j] : offs[j] + 2 * nj + 1 : 2]
+            wn = wall[offs[j] : offs[j] + 2 * nj + 1 : 2]
+            try:
+                K, P = _gains(np.ascontiguousarray(Z_list[j]), np.ascontiguousarray(Bn), wn, R_inv)
+            except np.linalg.LinAlgError:
+                raise ValueError(
+                    f"solve_jump_riccati: Z is not positive definite on segment {j}; the system "
+                    "is not controllable over the remaining horizon (lengthen the horizon)"
+                ) from None
+            K_list.append(K)
+            P_list.append(P)
+    return RiccatiSolution(s_list, Z_list, K_list, P_list)

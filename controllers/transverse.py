@@ -1,0 +1,277 @@
+"""Transverse linearization of a planned walking motion (paper Section 3; control notes 3 and 4).
+
+For one step with the virtual constraint ``q1 = phi(theta)``, ``theta = q2``, and the nominal
+speed profile ``theta_dot*(theta)^2 = F*(theta)`` of the reduced dynamics, the transverse
+coordinates of a state ``x = (q1, q2, q1d, q2d)`` are::
+
+    x_perp = [I, y, y_dot],   I = theta_dot^2 - F*(theta),   y = q1 - phi(theta),
+    y_dot = q1d - phi'(theta) theta_dot.
+
+With ``y_ddot = v`` (partial feedback linearisation, :func:`controllers.reduced.pfl_terms`) their
+linearization along the nominal motion is ``z' = A(t) z + B(t) v`` (:meth:`StepModel.matrices`),
+and across an impact ``z+ = F_j z-`` (:func:`impact_jacobian`; :func:`impact_jacobian_fd` is the
+finite-difference counterpart used to check it).
+
+Derivatives of model terms with respect to ``q1`` and ``q1d`` are taken by the complex step
+through :mod:`envs.model` (exact to rounding), so the model equations are written only once.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+from numpy.polynomial import polynomial as npoly
+from scipy.optimize import brentq
+
+from envs import model
+
+from .bezier import BezierConstraint
+from .reduced import ChebyshevSeries, phase_grid, reduced_coefficients, reduced_integral
+
+__all__ = [
+    "StepModel",
+    "impact_jacobian",
+    "impact_jacobian_fd",
+    "surface_state",
+]
+
+_H = 1e-30  # complex-step size
+
+
+@dataclass
+class StepModel:
+    """Nominal motion of one step and its transverse coordinates.
+
+    Args:
+        P: robot parameter vector (``RobotParams.vector()``).
+        constraint: the step's virtual constraint.
+        thetadot_plus: nominal ``theta_dot`` at ``theta_plus`` [rad/s], > 0.
+        ground_slope: slope ``dh/dx`` of the ground at the planned foothold (0 on stairs and
+            blocks); defines the switching surface used by the impact linearization.
+        margin: fraction of the step's span by which the nominal speed profile is extended on
+            both sides (states slightly before ``theta_plus`` or after ``theta_minus``).
+        n_cheb: Chebyshev grid size of the speed profile.
+
+    Raises:
+        ValueError: the nominal ``theta_dot^2`` is not positive over the extended step.
+    """
+
+    P: np.ndarray
+    constraint: BezierConstraint
+    thetadot_plus: float
+    ground_slope: float = 0.0
+    margin: float = 0.15
+    n_cheb: int = 48
+    _F: ChebyshevSeries = field(init=False, repr=False)
+    _pc: tuple = field(init=False, repr=False)
+
+    def __post_init__(self) -> None:
+        c = self.constraint
+        if not (math.isfinite(self.thetadot_plus) and self.thetadot_plus > 0):
+            raise ValueError(f"StepModel.thetadot_plus = {self.thetadot_plus!r}; allowed > 0")
+        a = c.theta_plus - self.margin * c.span
+        b = c.theta_minus + self.margin * c.span
+        th = phase_grid(a, b, self.n_cheb)
+        # power-basis coefficients of phi in s (exact: phi is a polynomial of this order)
+        sn = 0.5 * (1 - np.cos(np.pi * np.arange(c.order + 1) / c.order))
+        pc = npoly.polyfit(sn, c.phi(c.theta_plus + sn * c.span), c.order)
+        self._pc = (pc, npoly.polyder(pc) / c.span, npoly.polyder(pc, 2) / c.span**2)
+        phi, dphi, ddphi = self.derivatives(th)
+        al, be, ga = reduced_coefficients(self.P, phi, th, dphi, ddphi)
+        if np.any(np.abs(al) < 1e-12):
+            raise ValueError("StepModel: alpha(theta) vanishes on the step (singular constraint)")
+        psi, gam = reduced_integral(th, al, be, ga)
+        # F(theta) = psi(theta, a) Fa + Gam(theta, a), with Fa fixed by F(theta_plus)
+        psi_s, gam_s = ChebyshevSeries(psi, a, b), ChebyshevSeries(gam, a, b)
+        fa = (self.thetadot_plus**2 - gam_s(c.theta_plus)) / psi_s(c.theta_plus)
+        Fv = psi * fa + gam
+        if np.any(Fv <= 0):
+            raise ValueError(
+                "StepModel: the nominal theta_dot^2 is not positive over the step "
+                f"(min {Fv.min():.3g} rad^2/s^2): the walker would stall"
+            )
+        self._F = ChebyshevSeries(Fv, a, b)
+
+    # ------------------------------------------------------------------ nominal motion
+    def derivatives(self, theta: np.ndarray | float) -> tuple[np.ndarray, ...]:
+        """``(phi, phi', phi'')`` at ``theta`` (the constraint in power form, fast)."""
+        c = self.constraint
+        s = (np.asarray(theta, dtype=np.float64) - c.theta_plus) / c.span
+        return tuple(npoly.polyval(s, k) for k in self._pc)
+
+    @property
+    def power_coefficients(self) -> np.ndarray:
+        """Coefficients of ``phi`` as a polynomial in ``s = (theta - theta+) / span``
+        (ascending powers)."""
+        return self._pc[0]
+
+    @property
+    def theta_plus(self) -> float:
+        return self.constraint.theta_plus
+
+    @property
+    def theta_minus(self) -> float:
+        return self.constraint.theta_minus
+
+    def thetadot_sq(self, theta: np.ndarray | float) -> np.ndarray | float:
+        """Nominal ``theta_dot^2`` [rad^2/s^2] at ``theta``."""
+        return self._F(theta)
+
+    def dthetadot_sq(self, theta: np.ndarray | float) -> np.ndarray | float:
+        """``d F* / d theta = -2 (beta F* + gamma) / alpha`` [rad/s^2]."""
+        th = np.asarray(theta, dtype=np.float64)
+        phi, dphi, ddphi = self.derivatives(th)
+        al, be, ga = reduced_coefficients(self.P, phi, th, dphi, ddphi)
+        out = -2.0 * (be * self._F(th) + ga) / al
+        return float(out) if np.ndim(out) == 0 else out
+
+    def nominal_state(self, theta: np.ndarray | float) -> np.ndarray:
+        """Nominal ``(q1, q2, q1d, q2d)`` at ``theta`` (last axis)."""
+        th = np.asarray(theta, dtype=np.float64)
+        phi, dphi, _ = self.derivatives(th)
+        td = np.sqrt(self._F(th))
+        return np.stack([phi, th + 0.0 * phi, dphi * td, td + 0.0 * phi], axis=-1)
+
+    # ------------------------------------------------------------------ coordinates
+    def coords(self, x: np.ndarray) -> np.ndarray:
+        """Transverse coordinates ``[I, y, y_dot]`` of states ``x = (q1, q2, q1d, q2d)``."""
+        x = np.asarray(x, dtype=np.float64)
+        q1, th, q1d, thd = x[..., 0], x[..., 1], x[..., 2], x[..., 3]
+        phi, dphi, _ = self.derivatives(th)
+        return np.stack([thd * thd - self._F(th), q1 - phi, q1d - dphi * thd], axis=-1)
+
+    def coords_jacobian(self, x: np.ndarray) -> np.ndarray:
+        """``d x_perp / d x`` (3 x 4) at one state ``x``."""
+        q1, th, q1d, thd = (float(v) for v in x)
+        _, dphi, ddphi = self.derivatives(th)
+        dF = self.dthetadot_sq(th)
+        return np.array(
+            [
+                [0.0, -dF, 0.0, 2.0 * thd],
+                [1.0, -dphi, 0.0, 0.0],
+                [0.0, -ddphi * thd, 1.0, -dphi],
+            ]
+        )
+
+    # ------------------------------------------------------------------ linearization
+    def coefficients(self, theta: np.ndarray | float) -> tuple[np.ndarray, ...]:
+        """``(a11, a12, a13, b1, thetadot)`` along the nominal motion at ``theta`` (time units).
+
+        ``a11 = -2 td beta / alpha``, ``a12 = 2 td g_y / alpha``, ``a13 = 2 td g_yd / alpha``,
+        ``b1 = 2 td g_v / alpha`` (control notes, section 3) with ``td`` the nominal
+        ``theta_dot``.
+        """
+        P = self.P
+        th = np.atleast_1d(np.asarray(theta, dtype=np.float64))
+        phi, dphi, ddphi = self.derivatives(th)
+        al, be, ga = reduced_coefficients(P, phi, th, dphi, ddphi)
+        F = self._F(th)
+        td = np.sqrt(F)
+        thdd = -(be * F + ga) / al
+        # complex step in q1 (and q1d) of the unactuated row
+        #   Phi(q1, q1d) = M21(q1) (phi' thdd + phi'' td^2) + M22(q1) thdd + [C qd]_2 + G2
+        q1c = phi + 1j * _H
+        _, m12, m22 = model.mass_matrix(P, q1c)
+        _, c2 = model.coriolis(P, q1c, dphi * td + 0j, td + 0j)
+        _, g2 = model.gravity(P, q1c, th + 0j)
+        dPhi_dq1 = np.imag(m12 * (dphi * thdd + ddphi * F) + m22 * thdd + c2 + g2) / _H
+        _, c2d = model.coriolis(P, phi + 0j, dphi * td + 1j * _H, td + 0j)
+        dPhi_dq1d = np.imag(c2d) / _H
+        m12r = model.mass_matrix(P, phi)[1]
+        g_y, g_yd, g_v = -dPhi_dq1, -dPhi_dq1d, -m12r
+        k = 2.0 * td / al
+        return -k * be, k * g_y, k * g_yd, k * g_v, td
+
+    def matrices(self, theta: np.ndarray | float) -> tuple[np.ndarray, np.ndarray]:
+        """``A(theta)`` (..., 3, 3) and ``B(theta)`` (..., 3, 1) of ``z' = A z + B v`` in time
+        units, evaluated at the nominal point of phase ``theta``."""
+        a11, a12, a13, b1, _ = self.coefficients(theta)
+        n = a11.size
+        A = np.zeros((n, 3, 3))
+        A[:, 0, 0], A[:, 0, 1], A[:, 0, 2] = a11, a12, a13
+        A[:, 1, 2] = 1.0
+        B = np.zeros((n, 3, 1))
+        B[:, 0, 0], B[:, 2, 0] = b1, 1.0
+        return A, B
+
+    def phase_matrices(self, theta: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """``A / theta_dot``, ``B / theta_dot`` and ``w = 1 / theta_dot`` at ``theta``: the
+        linearization with the phase as independent variable (``dz/dtheta``)."""
+        a11, a12, a13, b1, td = self.coefficients(theta)
+        n = a11.size
+        A = np.zeros((n, 3, 3))
+        A[:, 0, 0], A[:, 0, 1], A[:, 0, 2] = a11 / td, a12 / td, a13 / td
+        A[:, 1, 2] = 1.0 / td
+        B = np.zeros((n, 3, 1))
+        B[:, 0, 0], B[:, 2, 0] = b1 / td, 1.0 / td
+        return A, B, 1.0 / td
+
+    # ------------------------------------------------------------------ switching surface
+    def surface(self, q1: float, q2: float) -> float:
+        """Switching function ``S(q)``: zero when the swing foot is on the ground line through
+        the planned foothold (slope :attr:`ground_slope`); positive above it."""
+        x0, y0 = self._foothold()
+        fx, fy = model.swing_foot_position(self.P, q1, q2, 0.0, 0.0)
+        return (fy - y0) - self.ground_slope * (fx - x0)
+
+    def surface_gradient(self, q1: float, q2: float) -> np.ndarray:
+        """``dS/dx`` (4,) at configuration ``(q1, q2)``."""
+        x0, y0 = self._foothold()
+        g = np.zeros(4)
+        for i, (a, b) in enumerate(((q1 + 1j * _H, q2 + 0j), (q1 + 0j, q2 + 1j * _H))):
+            fx, fy = model.swing_foot_position(self.P, a, b, 0.0, 0.0)
+            g[i] = np.imag(fy - self.ground_slope * fx) / _H
+        return g
+
+    def _foothold(self) -> tuple[float, float]:
+        c = self.constraint
+        fx, fy = model.swing_foot_position(self.P, float(c.phi(c.theta_minus)), c.theta_minus, 0, 0)
+        return float(fx), float(fy)
+
+
+def surface_state(step: StepModel, z: np.ndarray) -> np.ndarray:
+    """The state on the step's switching surface near the nominal pre-impact point whose
+    transverse coordinates are ``z = [I, y, y_dot]``."""
+    I, y, yd = (float(v) for v in z)
+    c = step.constraint
+
+    def s_of(th: float) -> float:
+        return step.surface(float(c.phi(th)) + y, th)
+
+    w = 0.05 * c.span
+    th = brentq(s_of, c.theta_minus - w, c.theta_minus + w, xtol=1e-15, rtol=1e-15)
+    F = float(step.thetadot_sq(th)) + I
+    td = math.sqrt(F)
+    return np.array([float(c.phi(th)) + y, th, float(c.dphi(th)) * td + yd, td])
+
+
+def _impact_map(P: np.ndarray, x: np.ndarray) -> np.ndarray:
+    return np.array(model.impact(P, x[0], x[1], x[2], x[3]))
+
+
+def impact_jacobian(step: StepModel, nxt: StepModel) -> np.ndarray:
+    """Closed-form ``F_j`` (3 x 3): transverse coordinates of ``step`` on its switching surface
+    to those of ``nxt`` after the impact, ``F = dT+ dDelta [dT-; dS]^-1 [I_3; 0]``."""
+    Pv = step.P
+    xm = step.nominal_state(step.theta_minus)
+    D = np.vstack([step.coords_jacobian(xm), step.surface_gradient(xm[0], xm[1])])
+    dXs = np.linalg.solve(D, np.vstack([np.eye(3), np.zeros((1, 3))]))
+    xc = np.tile(xm.astype(complex)[:, None], (1, 4)) + 1j * _H * np.eye(4)
+    dDelta = np.imag(np.array(model.impact(Pv, xc[0], xc[1], xc[2], xc[3]))) / _H
+    xp = _impact_map(Pv, xm)
+    return nxt.coords_jacobian(xp) @ dDelta @ dXs
+
+
+def impact_jacobian_fd(step: StepModel, nxt: StepModel, h: float = 1e-6) -> np.ndarray:
+    """``F_j`` by central differences of ``z -> x_perp^{j+1}(Delta(X_S(z)))``."""
+    P = step.P
+    F = np.zeros((3, 3))
+    for i in range(3):
+        e = np.zeros(3)
+        e[i] = h
+        zp = nxt.coords(_impact_map(P, surface_state(step, e)))
+        zm = nxt.coords(_impact_map(P, surface_state(step, -e)))
+        F[:, i] = (zp - zm) / (2 * h)
+    return F

@@ -1,0 +1,378 @@
+"""Gait planner: footholds, feasibility of the planned steps, impact invariance, open-loop
+validation in the nonlinear model, replanning, infeasible terrain."""
+
+import math
+
+import numpy as np
+import pytest
+from numpy.polynomial import Polynomial
+from scipy.integrate import solve_ivp
+
+from controllers import reduced as rd
+from controllers.bezier import bezier
+from controllers.footsteps import TerrainMap
+from controllers.planner import GaitPlanner, PlannerConfig, PlanningError
+from envs import model
+from envs.params import CONFIG_DIR
+from envs.terrain import Terrain
+
+PAPER_STAIRS = Terrain.from_yaml(CONFIG_DIR / "terrains" / "paper_stairs.yaml")
+# terrain cases per robot (the classic walker's legs are l = 1 m, the paper robot's 0.32 m)
+CASES = {
+    "paper": {
+        "flat": Terrain.flat(),
+        "paper_stairs": PAPER_STAIRS,
+        "stairs_up": Terrain.staircase(0.4, 3, 0.3, 0.01),
+        "blocks_low": Terrain.random_blocks(1, 0.3, 3.0, (0.15, 0.3), (-0.003, 0.003)),
+        "blocks_high": Terrain.random_blocks(1, 0.3, 3.0, (0.15, 0.3), (-0.01, 0.01)),
+    },
+    "classic": {
+        "flat": Terrain.flat(),
+        "stairs_down": Terrain.stairs([1.25, 1.94], [-0.01, -0.01]),
+        "blocks_low": Terrain.random_blocks(1, 1.0, 6.0, (0.45, 0.9), (-0.0025, 0.0025)),
+        "blocks_high": Terrain.random_blocks(1, 1.0, 6.0, (0.45, 0.9), (-0.005, 0.005)),
+        "downhill": Terrain.slope(-0.0525),
+    },
+}
+HORIZON = {"paper": 7, "classic": 7}
+ALL_CASES = [(r, t) for r in CASES for t in CASES[r]]
+
+
+class _Planners(dict):
+    def __missing__(self, robot):
+        self[robot] = GaitPlanner(robot)
+        return self[robot]
+
+
+@pytest.fixture(scope="module")
+def planners():
+    return _Planners()
+
+
+class _Plans(dict):
+    def __init__(self, planners):
+        super().__init__()
+        self.planners = planners
+
+    def __missing__(self, key):
+        r, t = key
+        pl = self.planners[r]
+        g = pl.periodic_gait()
+        self[key] = pl.plan(CASES[r][t], (g.q, g.qd), (0.0, 0.0), horizon=HORIZON[r])
+        return self[key]
+
+
+@pytest.fixture(scope="module")
+def plans(planners):
+    """Plans from the periodic gait's post-impact state, made on first use."""
+    return _Plans(planners)
+
+
+# ---------------------------------------------------------------------------- periodic gait
+@pytest.mark.parametrize("robot", list(CASES))
+def test_periodic_gait_is_a_fixed_point_of_the_step_map(planners, robot):
+    pl = planners[robot]
+    g = pl.periodic_gait()
+    cfg = pl.config
+    q, qd = g.step.post_impact_state()
+    np.testing.assert_allclose(q, g.q, atol=1e-12)
+    np.testing.assert_allclose(qd, g.qd, rtol=1e-9)
+    assert g.step_length == pytest.approx(cfg.step_length)
+    assert g.speed == pytest.approx(g.step_length / g.period)
+    assert cfg.duration_min <= g.period <= cfg.duration_max
+    assert 0.0 < g.zero_dynamics_gain < 1.0
+    assert np.max(np.abs(g.step.input_grid)) <= cfg.torque_fraction * pl.params.u_max + 1e-9
+    assert g.speed == pytest.approx(cfg.target_speed, rel=0.2)
+
+
+# ---------------------------------------------------------------------------- plan content
+@pytest.mark.parametrize("robot,terrain", ALL_CASES)
+def test_plans_satisfy_the_step_constraints(planners, plans, robot, terrain):
+    pl, plan = planners[robot], plans[robot, terrain]
+    cfg, P, l = pl.config, pl.P, pl.params.l  # noqa: E741
+    tmap = TerrainMap(CASES[robot][terrain])
+    assert len(plan) == HORIZON[robot]
+    prev = None
+    for s in plan:
+        fx, fy = s.foothold
+        assert fy == pytest.approx(tmap.height(fx))
+        assert tmap.distance_to_feature(np.array([fx]))[0] >= cfg.edge_margin - 1e-12
+        assert cfg.step_min - 1e-9 <= s.step_length <= cfg.step_max + 1e-9
+        # the swing foot reaches the foothold with both legs straight
+        ex, ey = model.swing_foot_position(P, s.coeffs[-1], s.theta_minus, *s.stance_foot)
+        assert (ex, ey) == pytest.approx(s.foothold, abs=1e-12)
+        th = np.linspace(s.theta_plus, s.theta_minus, 301)
+        assert np.min(s.thetadot_sq(th)) >= 0.98 * cfg.min_thetadot**2  # nodes: >= 1
+        # the input bound holds on the planner's grid nodes; between them within a few percent
+        assert np.max(np.abs(s.input(th))) <= cfg.torque_fraction * pl.params.u_max * 1.03
+        assert cfg.duration_min - 1e-6 <= s.duration <= cfg.duration_max + 1e-6
+        # swing foot above the ground once armed, retracted foot above it before
+        ph = s.phi(th)
+        x_full, y_full = model.swing_foot_position(P, ph, th, *s.stance_foot)
+        x_ret, y_ret = model.swing_foot_position(P, ph, th, *s.stance_foot, cfg.retract * l)
+        armed = np.maximum.accumulate(x_full - s.stance_foot[0] >= cfg.arm_distance * l)
+        assert np.all(y_ret[~armed] > tmap.height(x_ret[~armed]))
+        assert np.all((y_full - tmap.height(x_full))[armed][:-1] > 0)
+        # touchdown transversal: the foot moves down into the ground
+        q, qd = s.pre_impact_state()
+        assert model.swing_foot_velocity(P, q[0], q[1], qd[0], qd[1])[1] < 0
+        if prev is not None:  # consecutive steps chain through the impact map
+            q, qd = prev.post_impact_state()
+            assert s.stance_foot == prev.foothold
+            assert s.theta_plus == pytest.approx(q[1], abs=1e-14)
+            assert s.thetadot_plus == pytest.approx(qd[1], rel=1e-12)
+        prev = s
+
+
+@pytest.mark.parametrize("robot,terrain", ALL_CASES)
+def test_impact_invariance_holds_to_numerical_precision(plans, robot, terrain):
+    """After each nominal impact, y = q1 - phi_{j+1}(q2) and its rate vanish."""
+    plan = plans[robot, terrain]
+    for a, b in zip(plan.steps, plan.steps[1:]):
+        q, qd = a.post_impact_state()
+        y = q[0] - b.phi(q[1])
+        yd = qd[0] - b.dphi(q[1]) * qd[1]
+        assert abs(y) < 1e-13
+        assert abs(yd) < 1e-12 * max(1.0, abs(qd[1]))
+    q0, qd0 = plan.initial_state()
+    assert q0[0] - plan.phi(0, q0[1]) == pytest.approx(0.0, abs=1e-14)
+
+
+def test_speed_is_regulated_after_stairs_down(planners):
+    """The paper robot speeds up going down the stairs and slows back towards the gait."""
+    pl = planners["paper"]
+    g = pl.periodic_gait()
+    terr = PAPER_STAIRS
+    state, stance, prev, td = (g.q, g.qd), (0.0, 0.0), None, []
+    for _ in range(12):
+        plan = pl.plan(terr, state, stance, horizon=4, previous_plan=prev)
+        s = plan[0]
+        td.append(s.thetadot_plus)
+        state, stance, prev = s.post_impact_state(), s.foothold, plan
+    assert stance[1] == pytest.approx(-0.06)
+    assert max(td) > 1.1 * g.qd[1]  # it did speed up on the stairs
+    assert abs(td[-1] - g.qd[1]) < 0.3 * (max(td) - g.qd[1])  # and came back towards the gait
+
+
+# ---------------------------------------------------------------------------- open loop
+def _poly(step):
+    """phi as a power-series polynomial in theta (exact conversion of the Bezier curve)."""
+    s = np.linspace(0.0, 1.0, step.coeffs.size)
+    th = step.theta_plus + s * (step.theta_minus - step.theta_plus)
+    p = Polynomial.fit(th, bezier(step.coeffs, s), step.coeffs.size - 1)
+    return p, p.deriv(), p.deriv(2)
+
+
+def rollout(planner, plan, terrain, nsteps):
+    """Enforce each step's constraint exactly (PFL, v = 0) in the nonlinear model and locate
+    touchdowns of the armed full-length swing foot (retractable-foot rule)."""
+    P, l = planner.P, planner.params.l  # noqa: E741
+    arm = planner.config.arm_distance * l
+    tmap = TerrainMap(terrain)
+    q, qd = plan.initial_state()
+    x = np.array([q[0], q[1], qd[0], qd[1]])
+    stance = plan[0].stance_foot
+    out = []
+    for j in range(nsteps):
+        step = plan[j]
+        p0, p1, p2 = _poly(step)
+
+        def rhs(t, z, p1=p1, p2=p2):
+            q1, q2, w1, w2 = z
+            n, r = rd.pfl_terms(P, q1, q2, w1, w2, p1(q2), p2(q2))
+            a1, a2 = model.accelerations(P, q1, q2, w1, w2, -r / n)
+            return [w1, w2, a1, a2]
+
+        def touchdown(t, z, stance=stance):
+            fx, fy = model.swing_foot_position(P, z[0], z[1], stance[0], stance[1])
+            return fy - tmap.height(fx) if fx - stance[0] >= arm else 1.0
+
+        touchdown.terminal, touchdown.direction = True, -1
+        sol = solve_ivp(
+            rhs,
+            (0.0, 2 * step.duration),
+            x,
+            events=touchdown,
+            rtol=1e-12,
+            atol=1e-13,
+            method="DOP853",
+            dense_output=True,
+        )
+        assert sol.status == 1, f"no touchdown in step {j}"
+        t_td = sol.t_events[0][0]
+        tt = np.linspace(0.0, t_td, 200)
+        z = sol.sol(tt)
+        xm = sol.y_events[0][0]
+        foot = model.swing_foot_position(P, xm[0], xm[1], *stance)
+        out.append(
+            {
+                "y": np.max(np.abs(z[0] - p0(z[1]))),
+                "thd_err": np.max(np.abs(z[3] - step.thetadot(z[1]))),
+                "time_err": abs(t_td - step.duration),
+                "theta_err": abs(xm[1] - step.theta_minus),
+                "foot_err": math.hypot(foot[0] - step.foothold[0], foot[1] - step.foothold[1]),
+            }
+        )
+        x = np.array(model.impact(P, *xm))
+        stance = (float(foot[0]), float(foot[1]))
+        if j + 1 < nsteps:  # transverse state relative to the next step right after impact
+            nxt = plan[j + 1]
+            out[-1]["y_plus"] = x[0] - nxt.phi(x[1])
+            out[-1]["yd_plus"] = x[2] - nxt.dphi(x[1]) * x[3]
+    return out
+
+
+@pytest.mark.parametrize("robot,terrain", ALL_CASES)
+def test_open_loop_pfl_follows_the_plan(planners, plans, robot, terrain):
+    res = rollout(planners[robot], plans[robot, terrain], CASES[robot][terrain], nsteps=5)
+    for j, r in enumerate(res):
+        assert r["y"] < 1e-6, (j, r)  # the constraint holds (integration error only)
+        assert r["thd_err"] < 1e-5, (j, r)  # theta_dot(theta) as planned
+        assert r["time_err"] < 1e-5, (j, r)  # step duration as planned
+        assert r["theta_err"] < 1e-5, (j, r)  # touchdown at theta_minus ...
+        assert r["foot_err"] < 1e-5, (j, r)  # ... on the planned foothold
+        if "y_plus" in r:
+            assert abs(r["y_plus"]) < 1e-6 and abs(r["yd_plus"]) < 1e-5, (j, r)
+
+
+def test_plan_is_walkable_in_the_hybrid_simulator(planners, plans):
+    """The project's simulator (retractable feet, located touchdowns, impact and friction
+    checks) with the constraints enforced by PFL plus light PD on y (zero-order hold at 1 ms):
+    no trip, slip or stuck impact, and touchdowns on the planned footholds."""
+    from envs import SimConfig, simulate
+
+    pl, plan = planners["paper"], plans["paper", "paper_stairs"]
+    P, n_steps = pl.P, 6
+    current = {"j": 0, "q1": plan.initial_state()[0][0]}
+
+    def torque(t, q, qd):
+        if current["q1"] > 0.1 and q[0] < -0.1:  # q1 jumps from + to - at an impact
+            current["j"] += 1
+        current["q1"] = q[0]
+        step = plan[min(current["j"], len(plan) - 1)]
+        ph, dph, ddph = step.constraint.derivatives(q[1])
+        n, r = rd.pfl_terms(P, q[0], q[1], qd[0], qd[1], dph, ddph)
+        v = -400.0 * (q[0] - ph) - 40.0 * (qd[0] - dph * qd[1])
+        return float(model.input_gain(P) * (v - r) / n)
+
+    q0, qd0 = plan.initial_state()
+    T = float(plan.durations[:n_steps].sum()) - 0.5 * plan.durations[n_steps - 1]
+    res = simulate("paper", PAPER_STAIRS, q0, qd0, T, torque, dt=1e-3, config=SimConfig.accurate())
+    assert res.failure is None
+    assert len(res.footholds) == n_steps - 1
+    np.testing.assert_allclose(res.footholds, plan.footholds[: n_steps - 1], atol=5e-3)
+    np.testing.assert_allclose(
+        np.diff(np.r_[0.0, res.impact_times]), plan.durations[: n_steps - 1], rtol=0.05
+    )
+
+
+# ---------------------------------------------------------------------------- replanning
+def test_replanning_starts_on_the_actual_state_and_reuses_the_previous_plan(planners):
+    pl = planners["paper"]
+    g = pl.periodic_gait()
+    plan = pl.plan(PAPER_STAIRS, (g.q, g.qd), (0.0, 0.0), horizon=4)
+    q, qd = plan[0].post_impact_state()
+    # on the plan: the new plan's first step is the old plan's second one
+    again = pl.plan(PAPER_STAIRS, (q, qd), plan[0].foothold, horizon=4, previous_plan=plan)
+    np.testing.assert_allclose(again[0].coeffs, plan[1].coeffs, atol=1e-6)
+    assert again[0].foothold == plan[1].foothold
+    # off the plan: y = 0 and y_dot = 0 at the actual post-impact state
+    qa, qda = q + np.array([0.01, 0.0]), qd * np.array([0.9, 1.05])
+    off = pl.plan(PAPER_STAIRS, (qa, qda), plan[0].foothold, horizon=4, previous_plan=plan)
+    s = off[0]
+    assert qa[0] - s.phi(qa[1]) == pytest.approx(0.0, abs=1e-14)
+    assert qda[0] - s.dphi(qa[1]) * qda[1] == pytest.approx(0.0, abs=1e-13)
+    assert s.thetadot_plus == pytest.approx(qda[1])
+    assert np.isfinite(off.solve_time) and off.solve_time > 0
+
+
+def test_reused_step_solutions_do_not_depend_on_other_terrains(planners):
+    """Replanning reuses solved step problems; a planner that planned another terrain first
+    makes the same plan as a fresh one."""
+    pl = planners["paper"]
+    g = pl.periodic_gait()
+    rough = CASES["paper"]["blocks_high"]
+    first = pl.plan(PAPER_STAIRS, (g.q, g.qd), (0.0, 0.0), horizon=4)
+    used = pl.plan(rough, (g.q, g.qd), (0.0, 0.0), horizon=4, previous_plan=first)
+    fresh = GaitPlanner("paper").plan(
+        rough, (g.q, g.qd), (0.0, 0.0), horizon=4, previous_plan=first
+    )
+    np.testing.assert_allclose(used.footholds, fresh.footholds)
+    for a, b in zip(used, fresh):
+        np.testing.assert_allclose(a.coeffs, b.coeffs, atol=1e-12)
+
+
+def test_batched_step_evaluation_matches_single_points(planners):
+    """The vectorised evaluation of many candidate shapes (used for the SLSQP Jacobians and the
+    global search) gives, row by row, the constraints and cost of evaluating each alone."""
+    from controllers.planner import _Fixed, _reference, _StepModel
+
+    pl = planners["paper"]
+    g = pl.periodic_gait()
+    st = g.step
+    sm = _StepModel(pl.params, pl.config, TerrainMap(CASES["paper"]["blocks_high"]))
+    sm.ref, sm.ref_delta = _reference(g), st.delta
+    fx = _Fixed(
+        st.theta_plus,
+        st.coeffs[0],
+        st.slope_plus,
+        st.thetadot_plus,
+        (0.25, 0.0),
+        (0.25 + st.step_length, 0.0),
+        st.theta_minus,
+        st.coeffs[-1],
+    )
+    x = st.coeffs[2:-1] + 0.05 * np.random.default_rng(0).standard_normal((6, st.coeffs.size - 3))
+    batch = sm.evaluate_batch(fx, x)
+    for i in range(len(x)):
+        one = sm.evaluate(fx, x[i])
+        np.testing.assert_allclose(batch["g"][i], one["g"], rtol=1e-12, atol=1e-14)
+        assert batch["cost"][i] == pytest.approx(one["cost"], rel=1e-12)
+        assert batch["T"][i] == pytest.approx(one["T"], rel=1e-12)
+    # the fixed coefficients come from the step's start and end
+    np.testing.assert_allclose(sm.evaluate(fx, st.coeffs[2:-1])["a"], st.coeffs, atol=1e-12)
+
+
+def test_plan_from_scanned_heights_matches_the_true_terrain(planners):
+    pl = planners["paper"]
+    g = pl.periodic_gait()
+    xs = np.arange(-0.2, 1.6, 0.01)
+    scan = TerrainMap.from_scan(xs, PAPER_STAIRS.height(xs))
+    a = pl.plan(PAPER_STAIRS, (g.q, g.qd), (0.0, 0.0), horizon=5)
+    b = pl.plan(scan, (g.q, g.qd), (0.0, 0.0), horizon=5)
+    np.testing.assert_allclose(b.footholds[:, 1], a.footholds[:, 1])
+    np.testing.assert_allclose(b.footholds[:, 0], a.footholds[:, 0], atol=0.011)
+
+
+# ---------------------------------------------------------------------------- failures
+@pytest.mark.parametrize(
+    "terrain,step",
+    [
+        (Terrain.stairs([0.4], [0.3]), 2),  # a wall
+        (Terrain.stairs([0.4], [-1.0]), 2),  # a drop far beyond the leg length
+    ],
+)
+def test_infeasible_terrain_raises_planning_error(planners, terrain, step):
+    pl = planners["paper"]
+    g = pl.periodic_gait()
+    with pytest.raises(PlanningError) as err:
+        pl.plan(terrain, (g.q, g.qd), (0.0, 0.0), horizon=5)
+    assert err.value.step >= step  # the footholds before the obstacle are planned
+    assert err.value.constraint == "foothold"
+    assert "no admissible foothold" in str(err.value)
+
+
+def test_bad_state_and_config_raise(planners):
+    pl = planners["paper"]
+    with pytest.raises(PlanningError, match="theta_dot"):
+        pl.plan("flat", (np.array([-0.4, -0.2]), np.array([0.1, -0.5])), (0.0, 0.0))
+    with pytest.raises(ValueError, match="state"):
+        pl.plan("flat", (np.array([np.nan, 0.0]), np.array([0.1, 0.5])), (0.0, 0.0))
+    with pytest.raises(ValueError, match="unknown planner setting"):
+        PlannerConfig.from_dict({"speed": 1.0})
+    with pytest.raises(ValueError, match="target_speed"):
+        PlannerConfig(target_speed=-1.0)
+    with pytest.raises(ValueError, match="order"):
+        PlannerConfig(order=3)
+    with pytest.raises(ValueError, match="step_min"):
+        PlannerConfig(step_min=0.3, step_length=0.2)

@@ -1,0 +1,94 @@
+"""Reference policy (sensors + observer + planner + transverse controller) in the envs."""
+
+import gymnasium as gym
+import numpy as np
+import pytest
+
+import envs  # noqa: F401  (registers the ids)
+from controllers import PDPolicy, make_reference_policy
+
+COURSE_END = 1.1  # hip distance [m]: past both stairs and three or more steps on the flat
+
+
+def episode(env, policy, seed, max_steps=None):
+    obs, info = env.reset(seed=seed)
+    policy.reset()
+    n, actions = 0, []
+    while True:
+        a = policy(obs)
+        assert a.shape == (1,) and a.dtype == np.float32 and np.all(np.abs(a) <= 1)
+        actions.append(float(a[0]))
+        obs, _, terminated, truncated, info = env.step(a)
+        n += 1
+        if terminated or truncated or (max_steps is not None and n >= max_steps):
+            return info, np.array(actions)
+
+
+def test_reference_policy_walks_the_stairs_course_on_95_of_100_seeds():
+    """The paper's course with quantised, noisy encoders and the observer in the loop, seeds
+    0..99 (random start perturbations and sensor noise). A seed counts as walked when the hip
+    gets COURSE_END from the start (past both stairs, whose last edge is at 0.62 m, and three
+    or more steps along the flat after them) without a fall, trip or slip; episodes stop there
+    to keep the test short (the planner's calls dominate its run time)."""
+    env = gym.make("roughwalk/CompassGaitStairs-v0")
+    policy = make_reference_policy(env)
+    failures = {}
+    for seed in range(100):
+        obs, info = env.reset(seed=seed)
+        policy.reset()
+        while info["distance"] < COURSE_END:
+            obs, _, terminated, truncated, info = env.step(policy(obs))
+            if terminated or truncated:
+                break
+        if info["failure"] is not None or info["distance"] < COURSE_END:
+            failures[seed] = (info["failure"], round(info["distance"], 3))
+    assert len(failures) <= 5, failures
+
+
+def test_same_seed_same_actions_and_diagnostics():
+    env = gym.make("roughwalk/CompassGaitFlat-v0")
+    policy = make_reference_policy(env)
+    info1, a1 = episode(env, policy, 7, max_steps=300)
+    steps1 = policy.diagnostics["footsteps"]
+    info2, a2 = episode(env, policy, 7, max_steps=300)
+    np.testing.assert_array_equal(a1, a2)
+    assert steps1 == policy.diagnostics["footsteps"] >= 1
+    assert info1["failure"] is None
+
+
+def test_pd_policy_walks_flat_ground():
+    env = gym.make("roughwalk/CompassGaitFlat-v0")
+    policy = PDPolicy(env)
+    info, _ = episode(env, policy, 0, max_steps=800)
+    assert info["failure"] is None and info["footsteps"] >= 4
+
+
+def test_planning_failure_falls_back_without_crashing():
+    """A wall the planner cannot cross: the policy says so and keeps returning actions."""
+    wall = {"kind": "stairs", "edges": [0.1], "rises": [0.25], "height": 0.0}
+    env = gym.make("roughwalk/CompassGait-v0", terrain=wall)
+    policy = make_reference_policy(env)
+    info, actions = episode(env, policy, 0, max_steps=400)
+    assert np.all(np.isfinite(actions))
+    assert policy.diagnostics["fallbacks"], "the planning failure must be recorded"
+    kinds = {f[0] for f in policy.diagnostics["fallbacks"]}
+    assert kinds <= {
+        "shorter horizon",
+        "previous plan",
+        "PD on the last planned step",
+        "zero input",
+    }
+
+
+def test_bad_observations_and_modes_raise():
+    env = gym.make("roughwalk/CompassGaitFlat-v0")
+    policy = make_reference_policy(env)
+    obs, _ = env.reset(seed=0)
+    bad = obs.copy()
+    bad[0] = np.nan
+    with pytest.raises(ValueError, match="finite"):
+        policy(bad)
+    with pytest.raises(ValueError, match="entries|finite numbers"):
+        policy(obs[:3])
+    with pytest.raises(ValueError, match="sensor"):
+        make_reference_policy(gym.make("roughwalk/CompassGaitFlat-v0", observation="state"))

@@ -1,0 +1,140 @@
+"""Transverse linearization: A(t), B(t) and F_j against the nonlinear model."""
+
+import numpy as np
+import pytest
+from scipy.integrate import solve_ivp
+
+from controllers.reduced import pfl_terms
+from controllers.transverse import impact_jacobian, impact_jacobian_fd, surface_state
+from envs import model
+
+K0 = np.array([0.5, -30.0, -9.0])  # some fixed feedback v = K0 x_perp for the closed loop
+
+
+def _state_from_z(step, theta, z):
+    c = step.constraint
+    td = np.sqrt(step.thetadot_sq(theta) + z[0])
+    return np.array([c.phi(theta) + z[1], theta, c.dphi(theta) * td + z[2], td])
+
+
+def _nonlinear(P, step, theta_a, theta_b, x0):
+    """Closed loop y_ddot = K0 x_perp through the full model, theta as independent variable."""
+
+    def f(th, x):
+        q1, q2, q1d, q2d = x
+        z = step.coords(x)
+        n, r = pfl_terms(P, q1, q2, q1d, q2d, step.constraint.dphi(q2), step.constraint.ddphi(q2))
+        u = (K0 @ z - r) / n
+        a1, a2 = model.accelerations(P, q1, q2, q1d, q2d, u)
+        return np.array([q1d, q2d, a1, a2]) / q2d
+
+    r = solve_ivp(f, (theta_a, theta_b), x0, method="DOP853", rtol=1e-12, atol=1e-13)
+    return r.y[:, -1]
+
+
+def _linear(step, theta_a, theta_b, z0):
+    def f(th, z):
+        A, B, _ = step.phase_matrices(np.array([th]))
+        return (A[0] + B[0] @ K0[None, :]) @ z
+
+    r = solve_ivp(f, (theta_a, theta_b), z0, method="DOP853", rtol=1e-12, atol=1e-15)
+    return r.y[:, -1]
+
+
+@pytest.mark.parametrize("direction", [(1.0, 0.0, 0.0), (0.0, 1.0, 0.0), (0.3, -0.5, 2.0)])
+def test_continuous_linearization_error_is_quadratic(chain, direction):
+    P, steps = chain
+    st = steps[0]
+    ta, tb = st.theta_plus, st.theta_minus
+    d = np.array(direction) / np.linalg.norm(direction)
+    errs = []
+    for eps in (4e-3, 2e-3, 1e-3):
+        x0 = _state_from_z(st, ta, eps * d)
+        np.testing.assert_allclose(st.coords(x0), eps * d, atol=1e-12)
+        z_nl = st.coords(_nonlinear(P, st, ta, tb, x0))
+        z_lin = _linear(st, ta, tb, eps * d)
+        assert np.linalg.norm(z_lin) > 0.1 * eps  # the prediction is not trivially small
+        errs.append(np.linalg.norm(z_nl - z_lin))
+    # mismatch O(eps^2): halving eps divides it by about 4
+    assert 3.0 < errs[0] / errs[1] < 5.0 and 3.0 < errs[1] / errs[2] < 5.0
+    assert errs[-1] < 0.05 * 1e-3
+
+
+def test_time_and_phase_forms_agree(chain):
+    _, steps = chain
+    st = steps[1]
+    th = np.linspace(st.theta_plus, st.theta_minus, 7)
+    A, B = st.matrices(th)
+    Ap, Bp, w = st.phase_matrices(th)
+    np.testing.assert_allclose(Ap, A * w[:, None, None])
+    np.testing.assert_allclose(Bp, B * w[:, None, None])
+    assert np.all(A[:, 1:, :2] == 0) and np.all(A[:, 1, 2] == 1) and np.all(B[:, 2, 0] == 1)
+
+
+def test_impact_jacobian_closed_form_matches_finite_differences(chain):
+    _, steps = chain
+    for j in range(2):
+        F = impact_jacobian(steps[j], steps[j + 1])
+        Ffd = impact_jacobian_fd(steps[j], steps[j + 1], h=1e-6)
+        assert np.abs(F - Ffd).max() < 1e-6 * max(1.0, np.abs(F).max())
+        # the nominal pre-impact point maps onto the next step's nominal start (z = 0)
+        x = surface_state(steps[j], np.zeros(3))
+        z1 = steps[j + 1].coords(np.array(model.impact(steps[j].P, *x)))
+        assert np.abs(z1).max() < 1e-10
+
+
+def test_impact_jacobian_matches_flow_impact_flow(chain):
+    """F_j inside the full nonlinear flow -> impact -> flow map between two phase sections."""
+    P, steps = chain
+    s0, s1 = steps[0], steps[1]
+    ta = s0.theta_minus - 0.03
+    tb = s1.theta_plus + 0.03
+
+    def flow_map(z):
+        x = _state_from_z(s0, ta, z)
+
+        def f(th, x):
+            q1, q2, q1d, q2d = x
+            n, r = pfl_terms(P, q1, q2, q1d, q2d, s0.constraint.dphi(q2), s0.constraint.ddphi(q2))
+            a1, a2 = model.accelerations(P, q1, q2, q1d, q2d, -r / n)
+            return np.array([q1d, q2d, a1, a2]) / q2d
+
+        def hit(th, x):
+            return s0.surface(x[0], x[1])
+
+        hit.terminal, hit.direction = True, -1
+        r = solve_ivp(f, (ta, ta + 0.1), x, events=hit, method="DOP853", rtol=1e-13, atol=1e-14)
+        xm = r.y_events[0][0]
+        xp = np.array(model.impact(P, *xm))
+
+        def g(th, x):
+            q1, q2, q1d, q2d = x
+            n, r = pfl_terms(P, q1, q2, q1d, q2d, s1.constraint.dphi(q2), s1.constraint.ddphi(q2))
+            a1, a2 = model.accelerations(P, q1, q2, q1d, q2d, -r / n)
+            return np.array([q1d, q2d, a1, a2]) / q2d
+
+        r = solve_ivp(g, (xp[1], tb), xp, method="DOP853", rtol=1e-13, atol=1e-14)
+        return s1.coords(r.y[:, -1])
+
+    def transition(step, a, b):
+        def f(th, Phi):
+            A, _, _ = step.phase_matrices(np.array([th]))
+            return (A[0] @ Phi.reshape(3, 3)).ravel()
+
+        return (
+            solve_ivp(f, (a, b), np.eye(3).ravel(), rtol=1e-12, atol=1e-14).y[:, -1].reshape(3, 3)
+        )
+
+    pred = (
+        transition(s1, s1.theta_plus, tb)
+        @ impact_jacobian(s0, s1)
+        @ transition(s0, ta, s0.theta_minus)
+    )
+    h = 1e-6
+    J = np.zeros((3, 3))
+    for i in range(3):
+        e = np.zeros(3)
+        e[i] = h
+        J[:, i] = (flow_map(e) - flow_map(-e)) / (2 * h)
+    assert np.abs(flow_map(np.zeros(3))).max() < 1e-9
+    assert np.abs(J - pred).max() < 1e-5 * np.abs(pred).max()
