@@ -115,7 +115,7 @@ def test_reward_is_progress_minus_work_minus_failure() -> None:
 
 
 def test_zero_torque_from_the_nominal_start_completes_a_step() -> None:
-    """The provisional paper-robot start: a passive step (about 0.14 m) before any failure."""
+    """The paper-robot start: a passive step (about 0.14 m) before any failure."""
     env = gym.make("roughwalk/CompassGaitFlat-v0")
     _, info = env.reset(seed=0)
     while info["footsteps"] == 0:
@@ -166,9 +166,9 @@ def test_reset_options_pin_state_terrain_and_leg() -> None:
 
 def test_difficulty_scales_random_blocks() -> None:
     t = gym.make("roughwalk/CompassGaitRough-v0", difficulty=3.0).reset(seed=0)[1]["terrain"]
-    assert t["height_range"] == pytest.approx([-0.03, 0.03])
+    assert t["height_range"] == pytest.approx([-0.0225, 0.0225])
     steps = np.abs(np.diff(np.asarray(t["ys"])))
-    assert steps.max() <= 0.03 + 1e-12 and steps.max() > 0.015
+    assert steps.max() <= 0.0225 + 1e-12 and steps.max() > 0.011
     with pytest.raises(ValueError, match="difficulty"):
         gym.make("roughwalk/CompassGaitFlat-v0", difficulty=2.0)
 
