@@ -16,7 +16,10 @@ constraint ``q1 = phi_j(theta)``, ``theta = q2``, of order ``M`` (4 by default):
 Steps are optimised one after the other along the horizon (each step's end state is the next
 step's start), warm-started from the previous plan; where the ground changes height a step is
 optimised jointly with the next one (only the first is kept), which lets it anticipate drops and
-rises. Footholds are ranked so that every step's phase range stays near the periodic gait's;
+rises. Footholds are ranked so that every step's phase range stays near the periodic gait's,
+after those from which a chain of admissible footholds goes on for the rest of the horizon (up to
+three steps), also when the actual touchdown lands a few millimetres off (on stairs the footholds
+form narrow windows; one on the border of its window leaves no next step after a small miss);
 when a step has no feasible solution the search backtracks to other footholds and to shapes
 that end closer to the gait (depth first, with a budget of step solves). SLSQP gets
 forward-difference Jacobians whose perturbed points are evaluated in one vectorised call
@@ -828,6 +831,9 @@ def _violations(groups: list[np.ndarray]) -> tuple[float, str]:
     return worst, name
 
 
+_CHAIN_DEPTH = 3  # footholds looked ahead when ranking candidates
+_CHAIN_STRIDE = 4  # candidates tried first when looking for a chain (then all of them)
+_LANDING_SLACK = (0.008, 0.004)  # touchdown errors a foothold chain should tolerate [m]
 _FTOL = 1e-7  # SLSQP tolerance on the cost of a step problem
 _FD_STEP = math.sqrt(np.finfo(float).eps)  # forward-difference step of the Jacobians
 
@@ -952,6 +958,8 @@ class GaitPlanner:
         self._hints: dict[tuple, np.ndarray] = {}
         self._failed: dict[tuple, dict] = {}  # step problems with no feasible solution found
         self._terrain_key: bytes = b""
+        self._horizon = 1
+        self._chains: dict[tuple, bool] = {}  # foothold-chain existence, see _chain
 
     # ------------------------------------------------------------------ periodic gait
     def periodic_gait(
@@ -1073,6 +1081,7 @@ class GaitPlanner:
         start = (float(q[1]), float(q[0]), float(qd[0] / qd[1]), float(qd[1]))
         stance = (float(stance_foot[0]), float(stance_foot[1]))
         prev = list(previous_plan.steps) if previous_plan is not None else []
+        self._horizon = H
         self._budget = 3 * H + 2 * cfg.candidates
         self._fresh = False
         self._deepest: PlanningError | None = None
@@ -1111,9 +1120,7 @@ class GaitPlanner:
         as the last item says why the others failed."""
         cfg, l = self.config, self.params.l  # noqa: E741
         th_p, a0, slope, thd = start
-        cx, cy, why = candidate_footholds(
-            tmap, stance, cfg.rules(), l, self._theta_target(th_p), self._gait.step.theta_plus
-        )
+        cx, cy, why = self._candidates(tmap, stance, th_p, self._horizon - 1 - j)
         if cx.size == 0:
             yield PlanningError(j, "foothold", why)
             return
@@ -1181,6 +1188,54 @@ class GaitPlanner:
             best_fail[2] + ("" if self._budget > 0 else "; search budget exhausted"),
         )
 
+    def _candidates(
+        self, tmap: TerrainMap, stance: tuple[float, float], theta_plus: float, depth: int
+    ) -> tuple[np.ndarray, np.ndarray, str]:
+        """Candidate footholds from ``stance`` ranked as :func:`candidate_footholds` does, with
+        those from which a chain of ``depth`` more admissible footholds exists first, and among
+        them those that keep such a chain when the foot lands further off (``_LANDING_SLACK``; on
+        stairs the admissible footholds form narrow windows; a foothold on the edge of its
+        window leaves no next step once the actual touchdown misses it by a millimetre)."""
+        cfg, l = self.config, self.params.l  # noqa: E741
+        cx, cy, why = candidate_footholds(
+            tmap, stance, cfg.rules(), l, self._theta_target(theta_plus), self._gait.step.theta_plus
+        )
+        depth = min(int(depth), _CHAIN_DEPTH)
+        if cx.size == 0 or depth <= 0:
+            return cx, cy, why
+        rank = np.zeros(cx.size)
+        for k, x in enumerate(cx):
+            if not self._chain(tmap, x, depth):
+                rank[k] = len(_LANDING_SLACK) + 1
+                continue
+            for s in _LANDING_SLACK:  # largest landing error the chain tolerates, first
+                if self._chain(tmap, x - s, depth) and self._chain(tmap, x + s, depth):
+                    break
+                rank[k] += 1
+        order = np.argsort(rank, kind="stable")
+        return cx[order], cy[order], why
+
+    def _chain(self, tmap: TerrainMap, x: float, depth: int) -> bool:
+        """Whether ``depth`` consecutive admissible footholds exist from a stance foot at ``x``
+        [m] (geometric foothold rules only; memoised per terrain at 1 mm)."""
+        if depth <= 0:
+            return True
+        key = (self._terrain_key, round(float(x), 3), depth)
+        hit = self._chains.get(key)
+        if hit is not None:
+            return hit
+        xr = round(float(x), 3)
+        cx, _, _ = candidate_footholds(
+            tmap, (xr, float(tmap.height(xr))), self.config.rules(), self.params.l
+        )
+        ok = any(self._chain(tmap, float(c), depth - 1) for c in cx[:: max(1, _CHAIN_STRIDE)])
+        if not ok and _CHAIN_STRIDE > 1:
+            ok = any(self._chain(tmap, float(c), depth - 1) for c in cx)
+        if len(self._chains) > 65536:
+            self._chains.clear()
+        self._chains[key] = ok
+        return ok
+
     def _end_speed(self, tmap: TerrainMap, foothold: tuple[float, float], q1m: float) -> float:
         """End-of-step ``theta_dot`` to aim at: the gait's, corrected by the potential energy the
         next step will gain or lose (slow down before a drop, speed up before a rise)."""
@@ -1203,9 +1258,7 @@ class GaitPlanner:
         """The step after a step ending on ``fh`` (its start speed left open), or None."""
         cfg, l = self.config, self.params.l  # noqa: E741
         th_p2 = q2m - q1m
-        cx, cy, _ = candidate_footholds(
-            tmap, fh, cfg.rules(), l, self._theta_target(th_p2), self._gait.step.theta_plus
-        )
+        cx, cy, _ = self._candidates(tmap, fh, th_p2, 1)
         if cx.size == 0:
             return None
         fh2 = (float(cx[0]), float(cy[0]))
