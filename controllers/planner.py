@@ -1203,6 +1203,11 @@ class GaitPlanner:
         depth = min(int(depth), _CHAIN_DEPTH)
         if cx.size == 0 or depth <= 0:
             return cx, cy, why
+        # without a face or kink within reach every candidate continues alike (smooth ground)
+        reach = stance[0] + (depth + 1) * cfg.step_max + max(_LANDING_SLACK) + 2.0 * l
+        f = tmap.features
+        if not np.any((f > stance[0] - cfg.step_max) & (f < reach)):
+            return cx, cy, why
         rank = np.zeros(cx.size)
         for k, x in enumerate(cx):
             if not self._chain(tmap, x, depth):
