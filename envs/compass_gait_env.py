@@ -502,10 +502,10 @@ class WalkerBatch:
         self.reward[i] = 0.0
         self.terminated[i] = False
         self.footholds[i] = [(float(self._foot[i, 0]), float(self._foot[i, 1]))]
+        tx, ty, tn = self.sim.terrain_arrays
         _observe(
-            np.array([i]), self.mode, self._q, self._qd, self._foot, self._leg, self.sim._tx,
-            self.sim._ty, self.sim._tn, self._settings_vec, self._offsets, self.scan,
-            self.streams, self.fresh,
+            np.array([i]), self.mode, self._q, self._qd, self._foot, self._leg, tx, ty, tn,
+            self._settings_vec, self._offsets, self.scan, self.streams, self.fresh,
         )  # fmt: skip
         self._ring[:, i] = self.fresh[i]
 
@@ -513,10 +513,11 @@ class WalkerBatch:
     def step(self) -> None:
         """Advance every walker by one control period under ``self.tau`` [N m]."""
         self.sim.step(self.tau)
+        tx, ty, tn = self.sim.terrain_arrays
         self._after_step(
             self.mode, self._P, self._q, self._qd, self._foot, self._leg, self._status,
-            self._nimp, self._work, self._wcol, self._new_fail, self.sim._tx, self.sim._ty,
-            self.sim._tn, self._weights, self._settings_vec, self._offsets, self.scan,
+            self._nimp, self._work, self._wcol, self._new_fail, tx, ty, tn, self._weights,
+            self._settings_vec, self._offsets, self.scan,
             self.streams, self.hip_x, self.acc, self.footsteps, self.reward, self.terminated,
             self.fresh,
         )  # fmt: skip
