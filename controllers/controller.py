@@ -29,7 +29,7 @@ from __future__ import annotations
 
 import math
 import time
-from dataclasses import asdict, dataclass, field, fields
+from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Any
 
@@ -38,6 +38,7 @@ import yaml
 from numba import njit
 
 from envs import model
+from envs.config_util import dataclass_from_mapping
 from envs.params import RobotParams, as_params
 from envs.terrain import Terrain, as_terrain
 
@@ -126,13 +127,7 @@ class ControllerConfig:
         """Build from a dict (unknown keys raise ``ValueError``); None gives the defaults."""
         if d is None:
             return cls()
-        if isinstance(d, ControllerConfig):
-            return d
-        known = {f.name for f in fields(cls)}
-        unknown = sorted(set(d) - known)
-        if unknown:
-            raise ValueError(f"unknown controller setting(s) {unknown}; allowed: {sorted(known)}")
-        return cls(**d)
+        return dataclass_from_mapping(cls, d, "controller")
 
     @classmethod
     def from_yaml(cls, path: str | Path) -> ControllerConfig:

@@ -12,7 +12,7 @@ from __future__ import annotations
 
 import copy
 import math
-from dataclasses import dataclass, fields
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
@@ -24,6 +24,7 @@ from gymnasium import spaces
 from numba import njit, prange
 
 from . import model
+from .config_util import dataclass_from_mapping
 from .params import CONFIG_DIR, RobotParams, as_params
 from .sensors import (
     SensorConfig,
@@ -125,21 +126,6 @@ class InitialState:
             raise ValueError(
                 f"initial_state.stance_leg = {self.stance_leg!r}; allowed: 'A', 'B', 'random'"
             )
-
-
-def _from_dict(cls: type, d: Any, name: str) -> Any:
-    if isinstance(d, cls):
-        return d
-    if not isinstance(d, dict):
-        raise ValueError(f"{name} must be a mapping, got {type(d).__name__}")
-    known = {f.name for f in fields(cls)}
-    unknown = sorted(set(d) - known)
-    if unknown:
-        raise ValueError(f"unknown {name} setting(s) {unknown}; allowed: {sorted(known)}")
-    try:
-        return cls(**d)
-    except TypeError as exc:
-        raise ValueError(f"bad {name} settings: {exc}") from None
 
 
 def available_env_configs() -> list[str]:
@@ -316,7 +302,7 @@ class EnvSettings:
             raise ValueError("env config needs an 'initial_state' with q and qd")
         sim = data.get("simulator") or {}
         if isinstance(sim, dict):
-            sim = _from_dict(SimConfig, sim, "simulator")
+            sim = dataclass_from_mapping(SimConfig, sim, "simulator")
         elif not isinstance(sim, SimConfig):
             raise ValueError(f"simulator must be a mapping or SimConfig, got {type(sim)}")
         mes = data.get("max_episode_steps")
@@ -328,8 +314,10 @@ class EnvSettings:
             dt=float(dt),
             observation=obs,
             sensors=SensorConfig.from_dict(data.get("sensors")),
-            reward=_from_dict(RewardConfig, data.get("reward") or {}, "reward"),
-            initial_state=_from_dict(InitialState, data["initial_state"], "initial_state"),
+            reward=dataclass_from_mapping(RewardConfig, data.get("reward") or {}, "reward"),
+            initial_state=dataclass_from_mapping(
+                InitialState, data["initial_state"], "initial_state"
+            ),
             simulator=sim,
             max_episode_steps=None if mes is None else int(mes),
         )

@@ -14,6 +14,8 @@ from typing import Any
 import numpy as np
 import yaml
 
+from .config_util import dataclass_from_mapping
+
 CONFIG_DIR = Path(__file__).resolve().parent.parent / "configs"
 
 # Layout of the flat parameter vector consumed by the compiled model kernels (envs.model).
@@ -142,14 +144,8 @@ class RobotParams:
 
     @classmethod
     def from_dict(cls, d: dict[str, Any]) -> RobotParams:
-        """Build from a dict; unknown keys raise ``ValueError``."""
-        if not isinstance(d, dict):
-            raise ValueError(f"robot parameters must be a mapping, got {type(d).__name__}")
-        known = {f.name for f in fields(cls)}
-        unknown = sorted(set(d) - known)
-        if unknown:
-            raise ValueError(f"unknown robot parameter(s) {unknown}; allowed: {sorted(known)}")
-        return cls(**d)
+        """Build from a dict; unknown or missing keys raise ``ValueError``."""
+        return dataclass_from_mapping(cls, d, "robot", item="parameter")
 
     @classmethod
     def from_yaml(cls, path: str | Path) -> RobotParams:

@@ -52,6 +52,7 @@ from typing import Any
 import numpy as np
 from numba import njit
 
+from .config_util import dataclass_from_mapping
 from .terrain import terrain_height
 
 # indices of the sensor observation
@@ -124,15 +125,7 @@ class SensorConfig:
         """Build from a dict (unknown keys raise ``ValueError``); ``None`` gives the defaults."""
         if d is None:
             return cls()
-        if isinstance(d, SensorConfig):
-            return d
-        if not isinstance(d, dict):
-            raise ValueError(f"sensors must be a mapping, got {type(d).__name__}")
-        known = {f.name for f in fields(cls)}
-        unknown = sorted(set(d) - known)
-        if unknown:
-            raise ValueError(f"unknown sensor setting(s) {unknown}; allowed: {sorted(known)}")
-        return cls(**d)
+        return dataclass_from_mapping(cls, d, "sensor")
 
     def to_dict(self) -> dict[str, Any]:
         """Plain dict (YAML serialisable)."""
