@@ -21,10 +21,15 @@ after those from which a chain of admissible footholds goes on for the rest of t
 three steps), also when the actual touchdown lands a few millimetres off (on stairs the footholds
 form narrow windows; one on the border of its window leaves no next step after a small miss);
 when a step has no feasible solution the search backtracks to other footholds and to shapes
-that end closer to the gait (depth first, with a budget of step solves). SLSQP gets
-forward-difference Jacobians whose perturbed points are evaluated in one vectorised call
-(:meth:`_StepModel.evaluate_batch`); step problems already solved during the current walk are
-reused (replanning from the planned state re-solves only the newly added step). The nominal speed
+that end closer to the gait (depth first, with a budget of step solves). Terrain on which no
+chain of admissible footholds spans the horizon fails at once, naming the step without a
+foothold. SLSQP gets forward-difference Jacobians whose perturbed points are evaluated in one
+compiled batched call (:mod:`controllers.step_kernel` through
+:meth:`_StepModel.evaluate_batch`); step problems already solved during the current walk are
+reused (replanning from the planned state re-solves only the newly added step), and a look-ahead
+step whose warm start (the previous plan's solution, or the second step of a jointly optimised
+pair) is still feasible is kept as it is: it is optimised when it becomes the first step of a
+plan from a state off the previous plan. The nominal speed
 profile of each step comes from the integral of the reduced dynamics
 (:mod:`controllers.reduced`). The periodic flat-ground gait (:meth:`GaitPlanner.periodic_gait`)
 is the reference: its speed, its post-impact speed and its shape anchor the step costs.
@@ -50,9 +55,11 @@ import yaml
 from scipy.optimize import minimize
 
 from envs import model
+from envs.config_util import dataclass_from_mapping
 from envs.params import CONFIG_DIR, RobotParams, as_params
 
 from . import reduced as rd
+from . import step_kernel as sk
 from .bezier import BezierConstraint, bernstein_basis
 from .footsteps import FootholdRules, TerrainMap, candidate_footholds, touchdown_configuration
 
@@ -235,13 +242,7 @@ class PlannerConfig:
     @classmethod
     def from_dict(cls, d: dict[str, Any]) -> PlannerConfig:
         """Build from a dict; unknown keys raise ``ValueError``."""
-        if not isinstance(d, dict):
-            raise ValueError(f"planner config must be a mapping, got {type(d).__name__}")
-        known = {f.name for f in fields(cls)}
-        unknown = sorted(set(d) - known)
-        if unknown:
-            raise ValueError(f"unknown planner setting(s) {unknown}; allowed: {sorted(known)}")
-        return cls(**d)
+        return dataclass_from_mapping(cls, d, "planner")
 
     @classmethod
     def for_robot(cls, name: str, **changes: Any) -> PlannerConfig:
@@ -573,7 +574,24 @@ class _StepModel:
         self.ref: tuple[float, float, np.ndarray, float] | None = None
         self.ref_delta = 1.0  # the gait's impact gain
         self.wscale = 1.0  # scale of the weights that pull a step towards the gait
-        self._grid_cache: dict[tuple, tuple[Any, Any, Any]] = {}
+        self._qint = np.ascontiguousarray(rd.cumulative_integral_matrix(n))
+        self._face_cache: dict[tuple, tuple[Any, ...]] = {}
+        S = np.zeros(sk.S_COUNT)
+        S[sk.S_MIN_THD] = config.min_thetadot
+        S[sk.S_ALPHA_SCALE] = self.alpha_scale
+        S[sk.S_U_LIM], S[sk.S_U_MAX] = self.u_lim, params.u_max
+        S[sk.S_RETRACT], S[sk.S_ARM] = config.retract * l, config.arm_distance * l
+        S[sk.S_ARM_CLEAR], S[sk.S_CLEAR] = config.arm_clearance, config.clearance
+        S[sk.S_RAMP], S[sk.S_RET_CLEAR] = config.clearance_ramp, config.retracted_clearance
+        S[sk.S_FACE_CLEAR], S[sk.S_TD_SLOPE] = config.face_clearance, config.touchdown_slope
+        S[sk.S_MU] = config.friction
+        S[sk.S_DUR_MIN], S[sk.S_DUR_MAX] = config.duration_min, config.duration_max
+        S[sk.S_WEIGHT] = (2 * params.m + params.mHg) * params.g
+        S[sk.S_MASS] = params.total_mass
+        S[sk.S_W_SPEED], S[sk.S_W_TORQUE] = config.w_speed, config.w_torque
+        S[sk.S_W_END], S[sk.S_W_SLOPE] = config.w_end, config.w_slope
+        S[sk.S_W_SHAPE] = config.w_shape
+        self._settings = S
 
     def coeffs(
         self,
@@ -627,197 +645,86 @@ class _StepModel:
                 fx, np.asarray(free, dtype=np.float64), periodic, slope, thetadot_plus
             )
 
-    def _grids(self, theta_plus: float, span: float, nb: int) -> tuple[Any, Any, Any]:
-        """Phases of the Chebyshev grid (``(nb, n + 1)``) and of the check grid (one row and
-        ``(nb, check_points + 1)``) of a step; the last few are kept (SLSQP asks again)."""
-        key = (theta_plus, span, nb)
-        out = self._grid_cache.get(key)
+    def _faces(self, xs: float, x_foot: float) -> tuple[Any, ...]:
+        """Faces between the stance foot and the foothold (abscissa, top, crossed full-length),
+        and the ground slopes under the stance foot and the foothold."""
+        key = (xs, x_foot)
+        out = self._face_cache.get(key)
         if out is None:
-            th = np.tile(theta_plus + span * self.s, (nb, 1))
-            thg1 = theta_plus + span * self.sg
-            out = (th, thg1, np.tile(thg1, (nb, 1)))
-            if len(self._grid_cache) > 16:
-                self._grid_cache.clear()
-            self._grid_cache[key] = out
+            faces = self.tmap.faces_between(xs, x_foot)
+            arm = self.cfg.arm_distance * self.l
+            out = (
+                np.array([f[0] for f in faces], dtype=np.float64),
+                np.array([f[1] for f in faces], dtype=np.float64),
+                np.array([f[0] - xs >= arm for f in faces], dtype=np.bool_),
+                self.tmap.terrain.slope_at(xs),
+                self.tmap.terrain.slope_at(x_foot),
+            )
+            if len(self._face_cache) > 64:
+                self._face_cache.clear()
+            self._face_cache[key] = out
         return out
 
     def _evaluate(self, fx, free, periodic, slope_in, thd_in) -> dict[str, Any]:
-        cfg, P, l = self.cfg, self.P, self.l  # noqa: E741
+        cfg = self.cfg
         nb = free.shape[0]
-        rows = np.arange(nb)
-        a = self.coeffs(fx, free, periodic, slope_in)
+        a = np.ascontiguousarray(self.coeffs(fx, free, periodic, slope_in))
         span = fx.theta_minus - fx.theta_plus
-        th, thg1, thg = self._grids(fx.theta_plus, span, nb)
-        ph = a @ self.B[0].T
-        dph = a @ self.B[1].T / span
-        ddph = a @ self.B[2].T / span**2
-        al, be, ga = rd.reduced_coefficients(P, ph, th, dph, ddph)
-        al_safe = np.maximum(al, 0.02 * self.alpha_scale)
-        psi, gam = rd.reduced_integral(th, al_safe, be, ga)
-        extra = []
-        if periodic:
-            d2 = rd.impact_along_constraint(P, ph[:, -1], dph[:, -1])[0] ** 2
-            k = d2 * psi[:, -1]
-            td2 = np.where(k < 1.0, d2 * gam[:, -1] / (1.0 - k), -1.0)
-            thetadot_plus = np.sqrt(np.maximum(td2, 0.25 * cfg.min_thetadot**2))
-            extra = [np.stack([1.0 - k - 0.02, td2 / cfg.min_thetadot**2 - 1.0], axis=1)]
-        else:
-            if thd_in is None:
-                thetadot_plus = np.full(nb, float(fx.thetadot_plus))
-            else:
-                thetadot_plus = np.asarray(thd_in, dtype=np.float64)
-            k = np.full(nb, math.nan)
-        f = psi * thetadot_plus[:, None] ** 2 + gam
-        fmin = cfg.min_thetadot**2
-        if periodic:  # the nominal gait keeps a reserve of speed for rough ground
-            fmin = max(cfg.min_thetadot, cfg.gait_min_thetadot) ** 2
-        fpos = np.maximum(f, 0.25 * cfg.min_thetadot**2)
-        thd = np.sqrt(fpos)
-        t = rd.cumulative_integral(1.0 / thd, th[:, :1], th[:, -1:])
-        T = t[:, -1]
-        q1d, q2d = dph * thd, thd
-        q1dd, q2dd = rd.nominal_accelerations(al_safe, be, ga, dph, ddph, fpos)
-        u = rd.nominal_input(P, ph, th, dph, ddph, thd)
-        # stance-foot reaction, in the frame of the ground under the stance foot
         xs, ys = fx.stance
-        fxr, fyr = model.ground_reaction(P, ph, th, q1d, q2d, q1dd, q2dd)
-        ns = self.tmap.terrain.slope_at(xs)
-        cn, sn = 1.0 / math.hypot(1.0, ns), ns / math.hypot(1.0, ns)
-        fn = cn * fyr - sn * fxr
-        ft = cn * fxr + sn * fyr
-        weight = (2 * self.params.m + self.params.mHg) * self.params.g
-        # swing foot, full length and retracted, on the uniform check grid
-        phg = a @ self.Bg.T
-        fxf, fyf = model.swing_foot_position(P, phg, thg, xs, ys, 0.0)
-        fxr_, fyr_ = model.swing_foot_position(P, phg, thg, xs, ys, cfg.retract * l)
-        clear_full = fyf - self.tmap.height(fxf)
-        clear_ret = fyr_ - self.tmap.height(fxr_)
-        ahead = fxf - xs - cfg.arm_distance * l
-        armed = np.maximum.accumulate(ahead >= 0.0, axis=1)
-        any_armed = armed[:, -1]
-        i_arm = np.argmax(armed, axis=1)
-        # required clearance: arm_clearance at arming, rising to `clearance`, down to 0 at the end
-        s_arm = np.where(any_armed, self.sg[i_arm], 1.0)
-        rise = np.clip((self.sg - s_arm[:, None]) / cfg.clearance_ramp, 0.0, 1.0)
-        req = np.minimum(
-            self.clear_req, cfg.arm_clearance + (cfg.clearance - cfg.arm_clearance) * rise
+        face_x, face_top, face_full, slope_stance, slope_foot = self._faces(xs, fx.foothold[0])
+        sizes = sk.group_sizes(self.s.size, self.sg.size, face_x.size, periodic)
+        offsets = np.concatenate([[0], np.cumsum(sizes)]).astype(np.int64)
+        S = self._settings.copy()
+        S[sk.S_FMIN] = (
+            max(cfg.min_thetadot, cfg.gait_min_thetadot) ** 2 if periodic else cfg.min_thetadot**2
         )
-        g_clear = np.where(armed, clear_full - req, clear_ret - cfg.retracted_clearance)
-        g_clear = g_clear[:, :-1]
-        # the foot must get armed (ahead and above ground) before touchdown
-        g_arm = np.max(np.minimum(ahead[:, :-1] / l, (clear_full[:, :-1] - req[:, :-1]) / l), 1)
-        # vertical faces crossed by the foot: the full-length foot once ahead, else retracted
-        g_face = [np.ones(nb)]
-        for xf, top in self.tmap.faces_between(xs, fx.foothold[0]):
-            cross = (fxf[:, :-1] < xf) & (fxf[:, 1:] >= xf)
-            kk = np.argmax(cross, axis=1)
-            w = (xf - fxf[rows, kk]) / (fxf[rows, kk + 1] - fxf[rows, kk])
-            if xf - xs >= cfg.arm_distance * l:
-                yy = fyf[rows, kk] + w * (fyf[rows, kk + 1] - fyf[rows, kk])
-            else:
-                yy = fyr_[rows, kk] + w * (fyr_[rows, kk + 1] - fyr_[rows, kk])
-            g_face.append(np.where(cross.any(axis=1), (yy - top - cfg.face_clearance) / l, -1.0))
-        g_face = np.stack(g_face, axis=1)
-        f_fine = f @ self.interp.T
-        # touchdown transversality: clearance decreasing along theta
-        vx1, vy1 = model.swing_foot_velocity(P, ph[:, -1], th[:, -1], dph[:, -1], 1.0)
-        sl = self.tmap.terrain.slope_at(fx.foothold[0])
-        dclear = vy1 - sl * vx1
-        # impact
-        q1m, q2m, w1m, w2m = ph[:, -1], th[:, -1], q1d[:, -1], q2d[:, -1]
-        q1p, q2p, w1p, w2p = model.impact(P, q1m, q2m, w1m, w2m)
-        delta, slope_plus = rd.impact_along_constraint(P, q1m, dph[:, -1])
-        vcm = np.array(model.centre_of_mass_velocity(P, q1m, q2m, w1m, w2m))
-        vcp = np.array(model.centre_of_mass_velocity(P, q1p, q2p, w1p, w2p))
-        imp = self.params.total_mass * (vcp - vcm)
-        ih = sl / math.hypot(1.0, sl)
-        ic = 1.0 / math.hypot(1.0, sl)
-        imp_n = ic * imp[1] - ih * imp[0]
-        imp_t = ic * imp[0] + ih * imp[1]
-        tvx, tvy = model.swing_foot_velocity(P, q1p, q2p, w1p, w2p)
-        trail_n = cn * tvy - sn * tvx  # normal of the ground under the old stance foot
-        thd_ref = max(cfg.min_thetadot, 1e-3)
-        mu = cfg.friction
-        groups = [
-            (np.concatenate([f, f_fine], axis=1) - fmin) / thd_ref**2,
-            al / self.alpha_scale - 0.05,
-            (self.u_lim - np.abs(u)) / self.params.u_max,
-            g_clear / l,
-            np.concatenate([fn / weight, (mu * fn - np.abs(ft)) / weight], axis=1),
-            g_arm[:, None],
-            g_face,
-            ((-dclear - cfg.touchdown_slope) / l)[:, None],
-            np.stack(
-                [
-                    (T - cfg.duration_min) / cfg.duration_min,
-                    (cfg.duration_max - T) / cfg.duration_min,
-                ],
-                axis=1,
-            ),
-            np.stack([imp_n, mu * imp_n - np.abs(imp_t)], axis=1)
-            / (self.params.total_mass * l * thd_ref),
-            (trail_n / (l * thd_ref))[:, None],
-            ((delta * thd[:, -1] - cfg.min_thetadot) / thd_ref)[:, None],
-            *extra,
-        ]
-        # cost
-        v = (fx.foothold[0] - xs) / T
+        S[sk.S_XS], S[sk.S_YS] = xs, ys
+        S[sk.S_SLOPE_STANCE], S[sk.S_SLOPE_FOOT] = slope_stance, slope_foot
+        S[sk.S_FOOT_X] = fx.foothold[0]
+        S[sk.S_THETA_PLUS], S[sk.S_SPAN] = fx.theta_plus, span
+        S[sk.S_WSCALE] = self.wscale
         if self.ref is None:  # periodic gait: speed target and effort
-            vt = cfg.target_speed
-            cost = cfg.w_speed * ((v - vt) / vt) ** 2
-            cost = cost + cfg.w_torque * np.mean((u / self.params.u_max) ** 2, axis=1)
+            S[sk.S_V_TARGET] = cfg.target_speed
+            shape_ref = np.zeros(a.shape[1])
         else:  # steps: the periodic gait's speed, end speed and shape (zero cost on the gait)
             thm_ref, slope_ref, shape_ref, vt = self.ref
             if math.isfinite(fx.thetadot_minus_ref):
                 thm_ref = fx.thetadot_minus_ref
-            cost = cfg.w_speed * ((v - vt) / vt) ** 2
-            # the next step's start speed (impact loss included) against the gait's
-            d_ref = self.ref_delta
-            w = self.wscale
-            cost = (
-                cost
-                + w * cfg.w_end * ((delta * thd[:, -1] - d_ref * thm_ref) / (d_ref * thm_ref)) ** 2
-            )
-            cost = cost + w * cfg.w_slope * (slope_plus - slope_ref) ** 2
-            # shape relative to the chord a_0 -> a_M, normalised
-            m = a.shape[1] - 1
-            base = a[:, :1] + (a[:, -1:] - a[:, :1]) * np.arange(m + 1) / m
-            rel = (a - base) / np.maximum(np.abs(a[:, -1:] - a[:, :1]), 1e-6)
-            cost = cost + w * cfg.w_shape * np.sum((rel[:, 2:-1] - shape_ref[2:-1]) ** 2, axis=1)
+            S[sk.S_V_TARGET], S[sk.S_THM_REF], S[sk.S_SLOPE_REF] = vt, thm_ref, slope_ref
+            S[sk.S_D_REF] = self.ref_delta
+        if periodic or thd_in is None:
+            thd_plus = np.full(nb, float(fx.thetadot_plus))
+        else:
+            thd_plus = np.ascontiguousarray(thd_in, dtype=np.float64)
+        G = np.empty((nb, offsets[-1]))
+        R = np.empty((nb, sk.R_COUNT))
+        F = np.empty((nb, self.s.size))
+        U = np.empty((nb, self.s.size))
+        sk.evaluate_steps(
+            self.P, a, thd_plus, periodic, self.ref is not None, S, self.s,
+            self.B[0], self.B[1], self.B[2], self.Bg, self.sg, self._qint, self.interp,
+            self.clear_req, self.tmap.xs, self.tmap.ys, face_x, face_top, face_full,
+            np.ascontiguousarray(shape_ref, dtype=np.float64), offsets, G, R, F, U,
+        )  # fmt: skip
+        groups = [G[:, offsets[i] : offsets[i + 1]] for i in range(len(sizes))]
+        g = np.empty((nb, sk.packed_size(sizes, _PACK_BLOCK)))
+        sk.pack(G, offsets, _PACK_BLOCK, g)
         return {
             "a": a,
-            "theta": th,
-            "f": f,
-            "T": T,
-            "u": u,
+            "f": F,
+            "T": R[:, sk.R_T],
+            "u": U,
             "groups": groups,
-            "g": _pack(groups),
-            "cost": cost,
-            "thetadot_minus": thd[:, -1],
-            "delta": delta,
-            "slope_plus": slope_plus,
-            "speed": v,
-            "arm_theta": np.where(any_armed, thg1[i_arm], math.nan),
-            "thetadot_plus": thetadot_plus,
-            "gain": k,
+            "g": g,
+            "cost": R[:, sk.R_COST],
+            "thetadot_minus": R[:, sk.R_THD_MINUS],
+            "delta": R[:, sk.R_DELTA],
+            "slope_plus": R[:, sk.R_SLOPE_PLUS],
+            "speed": R[:, sk.R_SPEED],
+            "arm_theta": R[:, sk.R_ARM_THETA],
+            "thetadot_plus": R[:, sk.R_THD_PLUS],
+            "gain": R[:, sk.R_GAIN],
         }
-
-
-def _pack(groups: list[np.ndarray], block: int = 8) -> np.ndarray:
-    """Constraint vector for SLSQP: long groups reduced to minima over blocks of neighbouring
-    grid points (SLSQP's cost grows quickly with the number of constraints); NaN -> violated.
-    Groups are reduced along their last axis (a leading batch axis is kept)."""
-    parts = [
-        np.minimum.reduceat(g, np.arange(0, g.shape[-1], block), axis=-1)
-        if np.shape(g)[-1] > 2 * block
-        else g
-        for g in groups
-    ]
-    out = np.concatenate(parts, axis=-1).astype(np.float64, copy=False)
-    bad = ~np.isfinite(out)
-    if bad.any():
-        out = np.where(bad & (out > 0), 1e3, np.where(bad, -1e3, out))
-    return out
 
 
 def _violations(groups: list[np.ndarray]) -> tuple[float, str]:
@@ -834,6 +741,7 @@ def _violations(groups: list[np.ndarray]) -> tuple[float, str]:
 _CHAIN_DEPTH = 3  # footholds looked ahead when ranking candidates
 _CHAIN_STRIDE = 4  # candidates tried first when looking for a chain (then all of them)
 _LANDING_SLACK = (0.008, 0.004)  # touchdown errors a foothold chain should tolerate [m]
+_PACK_BLOCK = 8  # long constraint groups reach SLSQP as minima over blocks of grid points
 _FTOL = 1e-7  # SLSQP tolerance on the cost of a step problem
 _FD_STEP = math.sqrt(np.finfo(float).eps)  # forward-difference step of the Jacobians
 
@@ -888,8 +796,8 @@ class _BatchProblem:
 
     def _with_jacobian_points(self, x: np.ndarray) -> tuple[float, np.ndarray, Any, int]:
         """:meth:`get`, evaluating the forward-difference points around ``x`` in the same
-        batched call (SLSQP asks for the Jacobians at most points it evaluates, and a batch
-        costs little more than a single point)."""
+        batched call (along a converging run SLSQP asks for the Jacobians at every point it
+        evaluates, and a batch costs little more than a single point)."""
         x = np.ascontiguousarray(x, dtype=np.float64)
         key = x.tobytes()
         if key not in self.cache:
@@ -954,12 +862,14 @@ class GaitPlanner:
         self._gait: PeriodicGait | None = None  # the gait of the current planning call
         # solutions of step problems already solved (by problem data), and the free coefficients
         # of steps optimised as the second of a pair (warm starts for when they come up)
-        self._memo: dict[tuple, np.ndarray] = {}
+        self._memo: dict[tuple, tuple[np.ndarray, bool]] = {}  # (solution, kept unoptimised)
         self._hints: dict[tuple, np.ndarray] = {}
         self._failed: dict[tuple, dict] = {}  # step problems with no feasible solution found
         self._terrain_key: bytes = b""
         self._horizon = 1
-        self._chains: dict[tuple, bool] = {}  # foothold-chain existence, see _chain
+        self._kept = False  # the last step solved was a kept warm start (see _solve)
+        self._chains: dict[tuple, int] = {}  # foothold-chain lengths, see _reach
+        self._chain_candidates: dict[tuple, tuple[np.ndarray, str]] = {}  # see _chain_footholds
 
     # ------------------------------------------------------------------ periodic gait
     def periodic_gait(
@@ -1085,6 +995,9 @@ class GaitPlanner:
         self._budget = 3 * H + 2 * cfg.candidates
         self._fresh = False
         self._deepest: PlanningError | None = None
+        reach = self._reach(tmap, stance[0], H)
+        if reach < H:  # no chain of admissible footholds that long: no search can succeed
+            raise PlanningError(reach, "foothold", self._reach_break(tmap, stance[0], H))
         steps = self._search(0, H, sm, tmap, start, stance, prev)
         plan = Plan(steps, self.params, cfg)
         plan.solve_time = time.perf_counter() - t0
@@ -1155,15 +1068,23 @@ class GaitPlanner:
                 continue
             fx = _Fixed(th_p, a0, slope, thd, stance, fh, q2m, q1m, self._end_speed(tmap, fh, q1m))
             x0 = _shape_guess(sm.ref[2], a0, q1m, cfg.order)
+            hint = self._hints.get(_hint_key(stance, fh))
+            solved = True  # the warm start is an optimised solution
             if warm and abs(warm[0].foothold[0] - fh[0]) < cfg.rules().resolution:
                 x0 = warm[0].coeffs[2:-1].copy()
+            elif hint is not None:
+                x0 = hint
             else:
-                x0 = self._hints.get(_hint_key(stance, fh), x0)
+                solved = False
+            # a look-ahead step whose warm start is an optimised solution (of the previous plan
+            # or as the second step of a pair) is kept when still feasible; it is re-optimised
+            # when it becomes the first step from an actual state off the plan
+            keep = j > 0 and solved
             nxt = self._next_template(tmap, fh, q1m, q2m) if cfg.lookahead else None
             if nxt is not None and cfg.lookahead == 2:  # where the ground changes height
                 dh = abs(nxt[0].foothold[1] - fh[1]) + abs(fh[1] - stance[1])
                 nxt = nxt if dh > cfg.lookahead_rise else None
-            ev, ok = None, False
+            fx2 = x02 = None
             if nxt is not None:
                 fx2, x02 = nxt
                 k2 = [p for p in prev if abs(p.stance_foot[0] - fh[0]) < 1e-3]
@@ -1171,14 +1092,18 @@ class GaitPlanner:
                     x02 = k2[0].coeffs[2:-1].copy()
                 else:
                     x02 = self._hints.get(_hint_key(fh, fx2.foothold), x02)
-                ev, ok = self._solve_pair(sm, fx, x0, fx2, x02)
+            ev, ok = None, False
+            mode = "keep" if keep else "reuse"
+            if fx2 is not None:
+                ev, ok = self._solve_pair(sm, fx, x0, fx2, x02, mode)
             if not ok:
-                ev, ok = self._solve(sm, fx, x0)
+                ev, ok = self._solve(sm, fx, x0, mode)
             if not self._fresh:
                 self._budget += 1
             if ok:
                 c = BezierConstraint(ev["a"], th_p, q2m)
                 yield StepPlan(j, self.P, c, thd, stance, fh, cfg.grid, ev["arm_theta"])
+            if ok:
                 continue
             worst, name = _violations(ev["groups"])
             best_fail = max(best_fail, (worst, name, f"foothold x = {fh[0]:.3f} m"))
@@ -1223,23 +1148,52 @@ class GaitPlanner:
     def _chain(self, tmap: TerrainMap, x: float, depth: int) -> bool:
         """Whether ``depth`` consecutive admissible footholds exist from a stance foot at ``x``
         [m] (geometric foothold rules only; memoised per terrain at 1 mm)."""
+        return self._reach(tmap, x, depth) >= depth
+
+    def _chain_footholds(self, tmap: TerrainMap, x: float) -> tuple[np.ndarray, str]:
+        """Admissible footholds from a stance foot at ``x`` rounded to 1 mm, and why there are
+        none when empty (memoised per terrain)."""
+        xr = round(float(x), 3)
+        key = (self._terrain_key, xr)
+        hit = self._chain_candidates.get(key)
+        if hit is None:
+            cx, _, why = candidate_footholds(
+                tmap, (xr, float(tmap.height(xr))), self.config.rules(), self.params.l
+            )
+            if len(self._chain_candidates) > 65536:
+                self._chain_candidates.clear()
+            hit = self._chain_candidates[key] = (cx, why)
+        return hit
+
+    def _reach(self, tmap: TerrainMap, x: float, depth: int) -> int:
+        """How many consecutive admissible footholds (at most ``depth``) a chain from a stance
+        foot at ``x`` [m] can have (geometric foothold rules only; memoised at 1 mm)."""
         if depth <= 0:
-            return True
+            return 0
         key = (self._terrain_key, round(float(x), 3), depth)
         hit = self._chains.get(key)
         if hit is not None:
             return hit
-        xr = round(float(x), 3)
-        cx, _, _ = candidate_footholds(
-            tmap, (xr, float(tmap.height(xr))), self.config.rules(), self.params.l
-        )
-        ok = any(self._chain(tmap, float(c), depth - 1) for c in cx[:: max(1, _CHAIN_STRIDE)])
-        if not ok and _CHAIN_STRIDE > 1:
-            ok = any(self._chain(tmap, float(c), depth - 1) for c in cx)
+        cx, _ = self._chain_footholds(tmap, x)
+        best = 0
+        # every _CHAIN_STRIDE-th candidate first: on passable ground one of them continues
+        for c in (*cx[:: max(1, _CHAIN_STRIDE)], *cx):
+            best = max(best, 1 + self._reach(tmap, float(c), depth - 1))
+            if best >= depth:
+                break
         if len(self._chains) > 65536:
             self._chains.clear()
-        self._chains[key] = ok
-        return ok
+        self._chains[key] = best
+        return best
+
+    def _reach_break(self, tmap: TerrainMap, x: float, depth: int) -> str:
+        """Why the longest chain of footholds from ``x`` ends (see :meth:`_reach`)."""
+        while True:
+            cx, why = self._chain_footholds(tmap, x)
+            if cx.size == 0:
+                return f"from a stance foot at x = {x:.3f} m: {why}"
+            depth -= 1
+            x = float(max(cx, key=lambda c: self._reach(tmap, float(c), depth)))
 
     def _end_speed(self, tmap: TerrainMap, foothold: tuple[float, float], q1m: float) -> float:
         """End-of-step ``theta_dot`` to aim at: the gait's, corrected by the potential energy the
@@ -1291,9 +1245,10 @@ class GaitPlanner:
             None if fx2 is None else data(fx2),
         )
 
-    def _solve_pair(self, sm, fx, x0, fx2, x02) -> tuple[dict, bool]:
+    def _solve_pair(self, sm, fx, x0, fx2, x02, mode: str = "reuse") -> tuple[dict, bool]:
         """SLSQP on the free coefficients of a step and the next one together; returns the
-        first step's evaluation and whether both steps are feasible."""
+        first step's evaluation and whether both steps are feasible (``mode``: see
+        :meth:`_solve`)."""
         n = x0.size
 
         def batch(X):
@@ -1304,26 +1259,47 @@ class GaitPlanner:
 
         prob = _BatchProblem(batch)
         key = self._problem_key(sm, fx, fx2)
+        self._kept = False
         if key in self._failed:
             return self._failed[key], False
-        if key in self._memo:  # the same problem was solved before: check and reuse
-            _, g, e1, r = prob.get(self._memo[key])
-            if np.min(g) >= -1e-7:
-                return _row(e1, r), True
+        x = self._reuse(prob, key, np.concatenate([x0, x02]), mode)
+        if x is not None:
+            _, _, e1, r = prob.get(x)
+            return _row(e1, r), True
         self._fresh = True
         x = prob.minimize(np.concatenate([x0, x02]), self.config.max_iter, _FTOL)
         _, g, e1, r = prob.get(x)
         ok = bool(np.min(g) >= -1e-7)
         if ok:
-            self._memo[key] = x
+            self._memo[key] = (x, False)
             self._hints[_hint_key(fx2.stance, fx2.foothold)] = x[n:]
         else:
             self._failed[key] = _row(e1, r)
         return _row(e1, r), ok
 
-    def _solve(self, sm: _StepModel, fx: _Fixed, x0: np.ndarray) -> tuple[dict, bool]:
+    def _reuse(self, prob: _BatchProblem, key: tuple, x0: np.ndarray, mode: str):
+        """A solution that needs no optimisation, or None: in modes ``reuse`` and ``keep`` the
+        solution of the same problem solved before (if still feasible), in mode ``keep`` also
+        the warm start ``x0`` if it is feasible (remembered as kept, see ``self._kept``)."""
+        if mode != "fresh" and key in self._memo:
+            x, kept = self._memo[key]
+            if np.min(prob.get(x)[1]) >= -1e-7:
+                self._kept = kept
+                return x
+        if mode == "keep" and np.min(prob.get(x0)[1]) >= -1e-7:
+            self._memo[key] = (np.array(x0, dtype=np.float64), True)
+            self._kept = True
+            return x0
+        return None
+
+    def _solve(
+        self, sm: _StepModel, fx: _Fixed, x0: np.ndarray, mode: str = "reuse"
+    ) -> tuple[dict, bool]:
         """SLSQP on the free coefficients from ``x0``; from the best point of a coarse global
-        search if that fails."""
+        search if that fails. ``mode``: ``reuse`` (a problem solved before is not optimised
+        again), ``keep`` (also a feasible warm start is kept as it is: for look-ahead steps,
+        re-optimised when they become the first step from a state off the plan) or ``fresh``
+        (optimise)."""
 
         def batch(X):
             ev = sm.evaluate_batch(fx, X)
@@ -1336,16 +1312,17 @@ class GaitPlanner:
             return _row(ev, r), bool(np.min(g) >= -1e-7)
 
         key = self._problem_key(sm, fx, None)
+        self._kept = False
         if key in self._failed:
             return self._failed[key], False
-        if key in self._memo:  # the same problem was solved before: check and reuse
-            _, g, evm, r = prob.get(self._memo[key])
-            if np.min(g) >= -1e-7:
-                return _row(evm, r), True
+        x = self._reuse(prob, key, x0, mode)
+        if x is not None:
+            _, _, evm, r = prob.get(x)
+            return _row(evm, r), True
         self._fresh = True
         ev, ok = run(x0)
         if ok:
-            self._memo[key] = ev["a"][2:-1].copy()
+            self._memo[key] = (ev["a"][2:-1].copy(), False)
             return ev, True
         chord = fx.a_last - fx.a0
         base = fx.a0 + chord * np.arange(2, self.config.order) / self.config.order
@@ -1357,7 +1334,7 @@ class GaitPlanner:
         best = max(range(len(samples)), key=lambda i: scores[i])
         ev2, ok2 = run(base + chord * samples[best])
         if ok2:
-            self._memo[key] = ev2["a"][2:-1].copy()
+            self._memo[key] = (ev2["a"][2:-1].copy(), False)
         if ok2 or np.sum(np.minimum(ev2["g"], 0)) > np.sum(np.minimum(ev["g"], 0)):
             ev = ev2
         if not ok2:

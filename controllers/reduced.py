@@ -22,14 +22,20 @@ from __future__ import annotations
 from functools import lru_cache
 
 import numpy as np
+from numba import njit
 from numpy.polynomial import chebyshev as cheb
 
 from envs import model
+
+# entry-wise functions are compiled like envs.model's: the same code serves numpy arrays (a grid
+# of phases) and scalars inside compiled loops (controllers.step_kernel)
+_jit = njit(cache=True, error_model="numpy")
 
 __all__ = [
     "ChebyshevSeries",
     "cheb_nodes",
     "cumulative_integral",
+    "cumulative_integral_matrix",
     "impact_along_constraint",
     "nominal_accelerations",
     "nominal_input",
@@ -66,6 +72,13 @@ def phase_grid(theta_a: float, theta_b: float, n: int) -> np.ndarray:
     """Chebyshev-Lobatto grid of ``n + 1`` phases on ``[theta_a, theta_b]`` [rad], increasing."""
     x = cheb_nodes(n)
     return 0.5 * (theta_a + theta_b) + 0.5 * (theta_b - theta_a) * x
+
+
+def cumulative_integral_matrix(n: int) -> np.ndarray:
+    """Matrix ``Q`` with ``int_{-1}^{x_k} f = (Q f)_k`` on the ``n + 1`` nodes of
+    :func:`cheb_nodes` (scale by half the interval for a :func:`phase_grid`); read-only."""
+    cheb_nodes(n)
+    return _cheb_matrices(int(n))[2]
 
 
 def cumulative_integral(values: np.ndarray, theta_a: float, theta_b: float) -> np.ndarray:
@@ -113,6 +126,7 @@ class ChebyshevSeries:
 
 
 # ---------------------------------------------------------------------------- reduced dynamics
+@_jit
 def reduced_coefficients(
     P: np.ndarray, phi: np.ndarray, theta: np.ndarray, dphi: np.ndarray, ddphi: np.ndarray
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -163,6 +177,7 @@ def step_time(theta: np.ndarray, thetadot_sq: np.ndarray) -> np.ndarray:
     return cumulative_integral(1.0 / np.sqrt(f), theta[0], theta[-1])
 
 
+@_jit
 def nominal_accelerations(
     alpha: np.ndarray,
     beta: np.ndarray,
@@ -177,6 +192,7 @@ def nominal_accelerations(
 
 
 # ---------------------------------------------------------------------------- impact, PFL
+@_jit
 def impact_along_constraint(
     P: np.ndarray, q1_minus: np.ndarray | float, dphi_minus: np.ndarray | float
 ) -> tuple[np.ndarray | float, np.ndarray | float]:
@@ -192,6 +208,7 @@ def impact_along_constraint(
     return delta, (d11 * dphi_minus + d12) / delta
 
 
+@_jit
 def pfl_terms(
     P: np.ndarray,
     q1: np.ndarray | float,
@@ -217,6 +234,7 @@ def pfl_terms(
     return n, r
 
 
+@_jit
 def nominal_input(
     P: np.ndarray,
     phi: np.ndarray,

@@ -193,13 +193,13 @@ def test_value_of_feedback_on_the_paper_stairs():
     with the speed along the motion off by I = -0.1 rad^2/s^2 (theta_dot about 0.78 instead of
     0.84 rad/s at the start). Plain PD on y leaves the speed error to the hybrid zero dynamics
     and the robot falls (trips or slips) on the way down the stairs; the transverse controller
-    walks all seven steps and removes most of the speed error."""
+    walks nine steps, down both stairs and on, and removes 90 % of the speed error."""
     stairs = TERRAINS["paper_stairs"]
     z0 = (-0.1, 0.0, 0.0)
-    failure, recs = closed_loop(TransverseController, stairs, z0, steps=7)
+    failure, recs = closed_loop(TransverseController, stairs, z0, steps=9)
     assert failure is None
     assert all(r.fallback is None for r in recs)
-    assert abs(recs[-1].xperp_end[0]) < 0.2 * abs(z0[0])
+    assert abs(recs[-1].xperp_end[0]) < 0.1 * abs(z0[0])
     failure_pd, recs_pd = closed_loop(PDController, stairs, z0, steps=7)
     assert failure_pd in ("trip", "slip", "fall")
     assert len(recs_pd) < 7

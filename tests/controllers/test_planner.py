@@ -266,6 +266,33 @@ def test_plan_is_walkable_in_the_hybrid_simulator(planners, plans):
     )
 
 
+def test_planned_arming_phase_matches_the_simulator(planners, plans):
+    """The planner applies the simulator's retractable-foot rule: the swing foot is armed where
+    it gets ahead by the arming distance (located between check points, where the full-length
+    foot must already clear the ground), so the simulator arms it at the planned phase."""
+    from envs import SimConfig
+    from envs.simulator import Simulator
+
+    pl, plan = planners["paper"], plans["paper", "blocks_high"]
+    P = pl.P
+    sim = Simulator("paper", CASES["paper"]["blocks_high"], dt=2e-4, config=SimConfig.accurate())
+    sim.reset(*plan.initial_state())
+    for step in list(plan)[:3]:
+        armed_at = None
+        for _ in range(20000):
+            q, qd = sim.q[0], sim.qd[0]
+            ph, dph, ddph = step.constraint.derivatives(q[1])
+            n, r = rd.pfl_terms(P, q[0], q[1], qd[0], qd[1], dph, ddph)
+            v = -400.0 * (q[0] - ph) - 40.0 * (qd[0] - dph * qd[1])
+            ev = sim.step(float(model.input_gain(P) * (v - r) / n))
+            if armed_at is None and sim.armed[0]:
+                armed_at = float(sim.q[0][1])
+            if ev.n_impacts[0] or ev.status[0]:
+                break
+        assert ev.status[0] == 0 and ev.n_impacts[0] == 1
+        assert armed_at == pytest.approx(step.arm_theta, abs=5e-4)
+
+
 # ---------------------------------------------------------------------------- replanning
 def test_replanning_starts_on_the_actual_state_and_reuses_the_previous_plan(planners):
     pl = planners["paper"]
