@@ -18,9 +18,9 @@ One file describes one training run. It holds two top-level sections:
                                      # batched vector env; not with env_wrapper)
 
 ``<env id>`` (rl-zoo3's hyperparameter format): ``policy``, ``n_timesteps``, ``n_envs``,
-``normalize``, ``env_kwargs``, ``env_wrapper``, ``policy_kwargs`` and the algorithm's own
-keyword arguments, with rl-zoo3's ``lin_<value>`` linear schedules. Because the env id is a
-top-level key, the same file works with
+``normalize``, ``frame_stack``, ``env_kwargs``, ``env_wrapper``, ``policy_kwargs`` and the
+algorithm's own keyword arguments, with rl-zoo3's ``lin_<value>`` linear schedules. Because the
+env id is a top-level key, the same file works with
 ``python -m rl_zoo3.train --algo ppo --env <env id> --gym-packages envs --conf-file <file>``,
 which ignores the ``run`` section.
 """
@@ -64,6 +64,8 @@ ZOO_KEYS = frozenset(
         "noise_std",
     }
 )
+# rl-zoo3 keys that roughwalk train does not apply: rejected rather than silently ignored
+UNSUPPORTED_ZOO_KEYS = ("vec_env_wrapper", "callback", "monitor_kwargs")
 SCHEDULE_KEYS = ("learning_rate", "clip_range", "clip_range_vf", "delta_std")
 RUN_KEYS = {
     "algo": str,
@@ -176,6 +178,12 @@ class AgentConfig:
     @property
     def env_kwargs(self) -> dict[str, Any]:
         return dict(self.hyperparams.get("env_kwargs") or {})
+
+    @property
+    def frame_stack(self) -> int | None:
+        """Number of stacked observations (``VecFrameStack``), or None when not stacking."""
+        n = self.hyperparams.get("frame_stack")
+        return int(n) if n else None
 
     @property
     def normalize_kwargs(self) -> dict[str, Any] | None:
@@ -406,9 +414,27 @@ def _check_range(path: Path, name: str, value: int, lo: int, hi: int | None) -> 
         raise ConfigError(f"{path}: {name} = {value} is out of range; allowed: {allowed}")
 
 
+# constructor arguments roughwalk train sets itself (the config must not)
+_SET_BY_TRAINER = {
+    "self",
+    "env",
+    "seed",
+    "device",
+    "tensorboard_log",
+    "verbose",
+    "_init_setup_model",
+}
+
+
 def _check_hyperparams(path: Path, algo_cls: type, hyper: dict[str, Any]) -> None:
     params = inspect.signature(algo_cls.__init__).parameters
-    allowed = (set(params) - {"self", "env"}) | ZOO_KEYS
+    unsupported = sorted(set(hyper) & set(UNSUPPORTED_ZOO_KEYS))
+    if unsupported:
+        raise ConfigError(
+            f"{path}: {', '.join(unsupported)} is not supported by roughwalk train; "
+            "use env_wrapper, frame_stack or normalize"
+        )
+    allowed = (set(params) - _SET_BY_TRAINER) | (ZOO_KEYS - set(UNSUPPORTED_ZOO_KEYS))
     unknown = sorted(set(hyper) - allowed)
     if unknown:
         raise ConfigError(
@@ -424,6 +450,13 @@ def _check_hyperparams(path: Path, algo_cls: type, hyper: dict[str, Any]) -> Non
                 raise ConfigError(f"{path}: {key} must be a positive number, got {value!r}")
             if float(value) != int(value):
                 raise ConfigError(f"{path}: {key} must be a whole number, got {value!r}")
+    fs = hyper.get("frame_stack")
+    if (
+        fs is not None
+        and fs is not False
+        and (isinstance(fs, bool) or not isinstance(fs, int) or fs < 1)
+    ):
+        raise ConfigError(f"{path}: frame_stack must be a whole number >= 1, got {fs!r}")
     for key in SCHEDULE_KEYS:
         value = hyper.get(key)
         if isinstance(value, str):

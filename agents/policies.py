@@ -170,6 +170,8 @@ class TrainedPolicy:
         config: the run's ``AgentConfig`` (from the manifest, or from rl-zoo3's saved
             settings for a model trained with rl-zoo3), else None; its ``wrap(env)`` applies
             the env wrappers the agent was trained with (e.g. the residual).
+        frame_stack: observations stacked per action (the config's ``frame_stack``), or None;
+            the stack restarts at :meth:`reset`, as SB3's ``VecFrameStack`` does.
     """
 
     def __init__(
@@ -198,19 +200,30 @@ class TrainedPolicy:
         vn_path = Path(vecnormalize) if vecnormalize else find_vecnormalize(self.path)
         self.vecnormalize_path = vn_path
         self.obs_norm = load_vecnormalize(vn_path) if vn_path else None
+        self.frame_stack = self.config.frame_stack if self.config else None
+        self._stack: np.ndarray | None = None
 
     def wrap_env(self, env: gym.Env) -> gym.Env:
         """Apply the env wrappers of the run (e.g. ``ResidualWrapper``) to ``env``."""
         return self.config.wrap(env) if self.config else env
 
     def reset(self) -> None:
-        """Nothing to reset (the networks are feed-forward)."""
+        """Start a new episode: clear the stacked observations (``frame_stack``)."""
+        self._stack = None
 
     def normalize(self, obs: np.ndarray) -> np.ndarray:
-        """The observation as the network saw it in training."""
-        if self.obs_norm is None:
+        """The observation as the network saw it in training (normalised, then stacked)."""
+        if self.obs_norm is not None:
+            obs = self.obs_norm.normalize_obs(obs)
+        if not self.frame_stack:
             return obs
-        return self.obs_norm.normalize_obs(obs)
+        obs = np.asarray(obs, dtype=np.float32)
+        if self._stack is None:  # as VecFrameStack at a reset: zeros, then the first observation
+            self._stack = np.zeros(obs.shape[:-1] + (obs.shape[-1] * self.frame_stack,), obs.dtype)
+        d = obs.shape[-1]
+        self._stack[..., :-d] = self._stack[..., d:].copy()
+        self._stack[..., -d:] = obs
+        return self._stack.copy()
 
     def __call__(self, obs: Any) -> np.ndarray:
         action, _ = self.model.predict(self.normalize(np.asarray(obs)), deterministic=True)

@@ -11,7 +11,12 @@ own action, the env applies the sum. (Overriding an SB3 policy's ``predict`` ins
 silently wrong, because rollout collection and off-policy sampling bypass ``predict``.)
 
 With ``observe_base=True`` the base command is appended to the observation as its last entry,
-so the agent knows what it is correcting. ``info`` carries ``base_action``, ``residual_action``
+so the agent knows what it is correcting; with ``observe_state=True`` the base policy's state
+estimate (``q1, q2, q1d, q2d`` and the stance leg, from its
+:class:`controllers.estimator.SensorStateEstimator`) comes before it, since the encoders alone
+carry no velocity. After every step a base policy with an ``applied(action)`` method (the
+reference controllers) is told the command actually applied, so its observer integrates the
+model with the true input. ``info`` carries ``base_action``, ``residual_action``
 (the scaled residual) and ``total_action`` for every step. A zero residual reproduces the base
 policy exactly (for base policies that return the action space's float32, as the roughwalk
 controllers do). The wrapper is a plain ``gymnasium.Wrapper``, so it works with SB3's
@@ -29,6 +34,7 @@ import numpy as np
 from gymnasium import spaces
 
 from agents.policies import Policy, make_baseline_policy
+from agents.wrappers import ESTIMATE_HIGH, ESTIMATE_LOW, estimate_features
 
 BaseSpec = str | Policy | Callable[[gym.Env], Policy]
 
@@ -45,6 +51,9 @@ class ResidualWrapper(gym.Wrapper, gym.utils.RecordConstructorArgs):
         scale: residual authority, in action units: the agent can move the command by at most
             ``scale`` either way; > 0.
         observe_base: append the base command to the observation.
+        observe_state: append the base policy's state estimate ``q1, q2, q1d, q2d, stance leg``
+            [rad, rad/s, 0/1] (``agents.wrappers.estimate_features``) before the base command; the
+            base policy must have an ``estimator`` (the reference controllers do).
         base_kwargs: options of a named base policy (e.g. ``planner`` settings of the
             reference controller; see ``agents.policies.make_baseline_policy``).
 
@@ -58,9 +67,15 @@ class ResidualWrapper(gym.Wrapper, gym.utils.RecordConstructorArgs):
         scale: float = 0.3,
         observe_base: bool = True,
         base_kwargs: dict[str, Any] | None = None,
+        observe_state: bool = False,
     ) -> None:
         gym.utils.RecordConstructorArgs.__init__(
-            self, base=base, scale=scale, observe_base=observe_base, base_kwargs=base_kwargs
+            self,
+            base=base,
+            scale=scale,
+            observe_base=observe_base,
+            base_kwargs=base_kwargs,
+            observe_state=observe_state,
         )
         gym.Wrapper.__init__(self, env)
         act = env.action_space
@@ -70,18 +85,26 @@ class ResidualWrapper(gym.Wrapper, gym.utils.RecordConstructorArgs):
             raise ValueError(f"scale = {scale!r} is out of range; allowed: > 0 (action units)")
         self.scale = float(scale)
         self.observe_base = bool(observe_base)
+        self.observe_state = bool(observe_state)
         self._low = act.low.astype(np.float64)
         self._high = act.high.astype(np.float64)
         self.action_space = spaces.Box(-1.0, 1.0, shape=act.shape, dtype=np.float32)
-        if self.observe_base:
+        if self.observe_base or self.observe_state:
             obs_space = env.observation_space
             if not isinstance(obs_space, spaces.Box) or len(obs_space.shape) != 1:
                 raise ValueError(
-                    f"observe_base=True needs a flat Box observation space, got {obs_space}"
+                    f"observe_base/observe_state need a flat Box observation space, got {obs_space}"
                 )
+            lo, hi = [obs_space.low], [obs_space.high]
+            if self.observe_state:
+                lo.append(ESTIMATE_LOW)
+                hi.append(ESTIMATE_HIGH)
+            if self.observe_base:
+                lo.append(act.low.ravel())
+                hi.append(act.high.ravel())
             self.observation_space = spaces.Box(
-                low=np.concatenate([obs_space.low, act.low.ravel()]).astype(obs_space.dtype),
-                high=np.concatenate([obs_space.high, act.high.ravel()]).astype(obs_space.dtype),
+                low=np.concatenate(lo).astype(obs_space.dtype),
+                high=np.concatenate(hi).astype(obs_space.dtype),
                 dtype=obs_space.dtype,
             )
         self.base_name = base if isinstance(base, str) else type(base).__name__
@@ -95,6 +118,11 @@ class ResidualWrapper(gym.Wrapper, gym.utils.RecordConstructorArgs):
             raise ValueError(f"base must be a policy name, a policy or a factory, got {base!r}")
         if base_kwargs and not isinstance(base, str):
             raise ValueError("base_kwargs apply to a named base policy only")
+        if self.observe_state and not hasattr(self.base_policy, "estimator"):
+            raise ValueError(
+                f"observe_state=True needs a base policy with a state estimator "
+                f"(e.g. 'reference' or 'pd'), got {self.base_name!r}"
+            )
         self._base = np.zeros(act.shape, dtype=np.float64)
 
     def _base_command(self, obs: Any) -> np.ndarray:
@@ -105,11 +133,14 @@ class ResidualWrapper(gym.Wrapper, gym.utils.RecordConstructorArgs):
         return np.clip(cmd, self._low, self._high)
 
     def _observe(self, obs: np.ndarray) -> np.ndarray:
-        if not self.observe_base:
+        if not (self.observe_base or self.observe_state):
             return obs
-        return np.concatenate([obs, self._base.ravel()]).astype(
-            self.observation_space.dtype, copy=False
-        )
+        parts = [np.asarray(obs, dtype=np.float64)]
+        if self.observe_state:
+            parts.append(estimate_features(self.base_policy.estimator))  # type: ignore[attr-defined]
+        if self.observe_base:
+            parts.append(self._base.ravel())
+        return np.concatenate(parts).astype(self.observation_space.dtype, copy=False)
 
     def reset(
         self, *, seed: int | None = None, options: dict[str, Any] | None = None
@@ -131,6 +162,9 @@ class ResidualWrapper(gym.Wrapper, gym.utils.RecordConstructorArgs):
         base = self._base
         total = np.clip(base + residual, self._low, self._high).astype(np.float32)
         obs, reward, terminated, truncated, info = self.env.step(total)
+        applied = getattr(self.base_policy, "applied", None)
+        if applied is not None:
+            applied(total)
         info = dict(info)
         info["base_action"] = base.astype(np.float32)
         info["residual_action"] = residual.astype(np.float32)

@@ -204,7 +204,7 @@ def build(
     From scratch, or from checkpoint ``resume`` with its VecNormalize statistics and, if saved,
     its replay buffer.
     """
-    from stable_baselines3.common.vec_env import VecNormalize
+    from stable_baselines3.common.vec_env import VecFrameStack, VecNormalize
 
     algo_cls = cfg.algo_class
     n_envs = cfg.n_envs
@@ -234,6 +234,10 @@ def build(
         if eval_env is not None:
             eval_kwargs = {**norm, "training": False, "norm_reward": False}
             eval_env = VecNormalize(eval_env, **eval_kwargs)
+    if cfg.frame_stack:  # over the normalised observations, as rl-zoo3 stacks them
+        env = VecFrameStack(env, cfg.frame_stack)
+        if eval_env is not None:
+            eval_env = VecFrameStack(eval_env, cfg.frame_stack)
 
     tb_log = None
     if tensorboard:

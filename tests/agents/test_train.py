@@ -60,6 +60,35 @@ def test_save_and_load_reproduce_deterministic_actions(name: str, smoke, tmp_pat
     assert np.ptp(before) > 0  # the actions depend on the observation
 
 
+def test_frame_stack_is_applied_in_training_and_in_evaluation(smoke, tmp_path: Path):
+    """rl-zoo3's ``frame_stack``: training stacks normalised observations with VecFrameStack;
+    a loaded model stacks them the same way, episode by episode."""
+    import gymnasium as gym
+    from stable_baselines3.common.vec_env import VecFrameStack
+    from stable_baselines3.common.vec_env.stacked_observations import StackedObservations
+
+    cfg = smoke(CONFIG_DIR / "ppo_flat.yaml", timesteps=1024)
+    cfg.hyperparams["frame_stack"] = 3
+    model, env, eval_env = build(cfg, tmp_path / "built", tensorboard=False)
+    assert isinstance(env, VecFrameStack) and isinstance(eval_env, VecFrameStack)
+    run = train(cfg, log_dir=tmp_path, progress_bar=False, tensorboard=False)
+    policy = TrainedPolicy(run / "model.zip")
+    assert policy.frame_stack == 3
+    single = policy.wrap_env(gym.make(cfg.env_id, **cfg.env_kwargs))
+    for seed in (5, 6):  # two episodes: the stack starts afresh at each reset
+        obs, _ = single.reset(seed=seed)
+        policy.reset()
+        stacker = StackedObservations(1, 3, single.observation_space)
+        stacked = stacker.reset(policy.obs_norm.normalize_obs(obs)[None])
+        for _ in range(25):
+            action = policy(obs)
+            expected = policy.model.predict(stacked, deterministic=True)[0][0]
+            np.testing.assert_array_equal(action, expected)
+            obs, *_ = single.step(action)
+            norm = policy.obs_norm.normalize_obs(obs)[None]
+            stacked, _ = stacker.update(norm, np.array([False]), [{}])
+
+
 def test_resume_from_checkpoint_continues_the_run(smoke, tmp_path: Path):
     cfg = smoke(CONFIG_DIR / "ppo_stairs.yaml", timesteps=2048)
     run = train(cfg, log_dir=tmp_path, progress_bar=False)

@@ -1,0 +1,51 @@
+"""State estimation from the sensors: decoding, observer, touchdowns located on the map."""
+
+import gymnasium as gym
+import numpy as np
+import pytest
+
+import envs  # noqa: F401  (registers the ids)
+from controllers import make_reference_policy
+from controllers.estimator import SensorStateEstimator
+
+
+def test_estimate_follows_the_true_state_through_impacts():
+    env = gym.make("roughwalk/CompassGaitStairs-v0")
+    policy = make_reference_policy(env)  # drives the robot; its estimator is under test
+    est = policy.estimator
+    obs, info = env.reset(seed=4)
+    policy.reset()
+    errors, feet = [], []
+    for k in range(700):
+        action = policy(obs)  # the estimate now reflects `obs`, which came with `info`
+        if k >= 20:
+            errors.append(np.abs(est.x - info["state"]))
+        assert est.stance_leg == info["stance_leg"]
+        feet.append(np.abs(np.subtract(est.stance_foot, info["stance_foot"])).max())
+        obs, _, terminated, truncated, info = env.step(action)
+        assert not (terminated or truncated)
+    err = np.array(errors)
+    assert info["footsteps"] >= 4
+    assert est.touchdowns_located == info["footsteps"] and est.touchdowns_guessed == 0
+    # rad, rad/s: quantisation and noise; after a touchdown a short transient while the
+    # observer converges from the located impact
+    assert err[:, :2].max() < 0.02 and err[:, 2:].max() < 0.3
+    assert np.median(err[:, :2]) < 1e-3 and np.median(err[:, 2:]) < 0.03
+    assert max(feet) < 5e-3  # m: dead reckoning of the stance foot on the map
+
+
+def test_decode_and_bad_input():
+    env = gym.make("roughwalk/CompassGaitFlat-v0")
+    est = SensorStateEstimator(env)
+    obs, info = env.reset(seed=0)
+    q, leg = est.decode(obs)
+    assert leg == info["stance_leg"] == 0
+    np.testing.assert_allclose(q, info["state"][:2], atol=5e-3)
+    with pytest.raises(ValueError, match="finite numbers"):
+        est.decode(np.full_like(obs, np.nan))
+    with pytest.raises(ValueError, match="finite numbers"):
+        est.decode(obs[:3])
+    with pytest.raises(ValueError, match="observation='sensors'"):
+        SensorStateEstimator(gym.make("roughwalk/CompassGaitFlat-v0", observation="state"))
+    assert est.update(q, leg, 0.0) == "start"
+    np.testing.assert_allclose(est.x[2:], env.unwrapped.settings.initial_state.qd)
