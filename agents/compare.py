@@ -3,9 +3,11 @@
 For each terrain setting (flat, the paper's stairs, rough blocks at two difficulty levels) it
 evaluates the baselines (passive, PD, reference controller) and, for every config in
 ``configs/agents`` whose env matches the setting, trains the agent (unless its run already has a
-final model) and evaluates the final model, all on the same held-out seeds. It writes
-``compare.json`` (every episode), ``compare.csv`` and ``compare.md`` (the summary table with the
-command reproducing each row and the training budget) to ``--out`` and prints the table.
+final model) and evaluates it (the best model of the periodic evaluations on the validation
+courses, else the final one; see :func:`chosen_model`), all on the same held-out test seeds.
+It writes ``compare.json`` (every episode), ``compare.csv`` and ``compare.md`` (the summary
+table with the command reproducing each row and the training budget) to ``--out`` and prints
+the table.
 """
 
 from __future__ import annotations
@@ -72,6 +74,14 @@ def _display(path: Path) -> str:
         return str(path)
 
 
+def chosen_model(run_dir: Path) -> Path:
+    """The model a run reports: ``best_model.zip`` (the best of the periodic evaluations on
+    the validation courses, disjoint from the test courses) when there is one, else the final
+    ``model.zip``."""
+    best = run_dir / "best_model.zip"
+    return best if best.is_file() else run_dir / "model.zip"
+
+
 def budget(cfg: AgentConfig, run_dir: Path) -> str:
     """Training budget of a run: env steps, and wall time from its manifest."""
     text = f"{cfg.n_timesteps:,} steps"
@@ -127,17 +137,19 @@ def compare(
                 evaluations.append(ev)
                 row["summary"] = ev.summary
             rows.append(row)
-        for cfg in (c for c in configs if s.matches(c)):
+        agents = sorted((c for c in configs if s.matches(c)), key=lambda c: (c.is_residual, c.algo))
+        for cfg in agents:  # from scratch first, then residual
             run_dir = run_dir_for(cfg, log_dir)
-            model = run_dir / "model.zip"
+            final = run_dir / "model.zip"
             train_cmd = f"roughwalk train {_display(cfg.path)} --log-dir {log_dir}"
+            if not dry_run and not final.is_file():
+                if not train_missing:
+                    raise FileNotFoundError(f"{final} missing (run: {train_cmd})")
+                train(cfg, log_dir=log_dir, progress_bar=progress, threads=None)
+            model = chosen_model(run_dir)
             cmd = f"{train_cmd} && " + evaluate_command(str(model), s, episodes, seed)
             row = {"setting": s.name, "policy": agent_label(cfg), "command": cmd}
             if not dry_run:
-                if not model.is_file():
-                    if not train_missing:
-                        raise FileNotFoundError(f"{model} missing (run: {train_cmd})")
-                    train(cfg, log_dir=log_dir, progress_bar=progress, threads=None)
                 ev = evaluate(str(model), s.env_id, episodes, seed, s.kwargs, progress=progress)
                 evaluations.append(ev)
                 row["summary"] = ev.summary
@@ -166,16 +178,18 @@ def markdown_table(rows: list[dict[str, Any]]) -> str:
     """The README table: one line per (setting, policy)."""
     lines = [
         "| terrain | policy | success [%] | footsteps | distance [m] | speed [m/s] | CoT "
-        "| training budget | command |",
-        "|---|---|---:|---:|---:|---:|---:|---|---|",
+        "| failures | training budget | command |",
+        "|---|---|---:|---:|---:|---:|---:|---|---|---|",
     ]
     for r in rows:
         s = r.get("summary")
+        reasons = (s or {}).get("failure_reasons") or {}
+        failures = ", ".join(f"{k} {v}" for k, v in sorted(reasons.items())) or "-"
         lines.append(
             f"| {r['setting']} | {r['policy']} | {_cell(s, 'success_rate', '.0f', 100)} "
             f"| {_cell(s, 'mean_footsteps', '.1f')} | {_cell(s, 'mean_distance', '.2f')} "
-            f"| {_cell(s, 'mean_speed', '.3f')} | {_cell(s, 'cost_of_transport', '.2f')} "
-            f"| {r['budget']} | `{r['command']}` |"
+            f"| {_cell(s, 'mean_speed', '.3f')} | {_cell(s, 'cost_of_transport', '.3f')} "
+            f"| {failures if s else '-'} | {r['budget']} | `{r['command']}` |"
         )
     return "\n".join(lines) + "\n"
 
@@ -184,6 +198,12 @@ def configure(parser: argparse.ArgumentParser) -> None:
     """Arguments of ``roughwalk compare``."""
     parser.add_argument("--configs", type=Path, default=CONFIG_DIR, help="agent config folder")
     parser.add_argument("--only", help="only agent configs whose name contains this")
+    parser.add_argument(
+        "--terrains",
+        nargs="+",
+        choices=[x.name for x in SETTINGS],
+        help="only these terrain settings (default: all)",
+    )
     parser.add_argument("--log-dir", type=Path, default=Path("runs"), help="runs folder")
     parser.add_argument("--out", type=Path, default=Path("results"), help="output folder")
     parser.add_argument("--episodes", type=int, default=50, help="episodes per row")
@@ -213,6 +233,7 @@ def run(args: argparse.Namespace) -> int:
             episodes=args.episodes,
             seed=args.seed,
             only=args.only,
+            settings=tuple(x for x in SETTINGS if not args.terrains or x.name in args.terrains),
             train_missing=not args.no_train,
             dry_run=args.dry_run,
             progress=not args.no_progress,

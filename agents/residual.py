@@ -14,14 +14,14 @@ With ``observe_base=True`` the base command is appended to the observation as it
 so the agent knows what it is correcting; with ``observe_state=True`` the base policy's state
 estimate (``q1, q2, q1d, q2d`` and the stance leg, from its
 :class:`controllers.estimator.SensorStateEstimator`) comes before it, since the encoders alone
-carry no velocity. After every step a base policy with an ``applied(action)`` method (the
-reference controllers) is told the command actually applied, so its observer integrates the
-model with the true input. ``info`` carries ``base_action``, ``residual_action``
-(the scaled residual) and ``total_action`` for every step. A zero residual reproduces the base
-policy exactly (for base policies that return the action space's float32, as the roughwalk
-controllers do). The wrapper is a plain ``gymnasium.Wrapper``, so it works with SB3's
-``make_vec_env`` (``wrapper_class``), ``VecNormalize``, rl-zoo3's ``env_wrapper`` and the
-vector-env adapter.
+carry no velocity. When the applied command differs from the base policy's own, a base
+policy with an ``applied(action)`` method (the reference controllers) is told it, so its
+observer integrates the model with the true input. ``info`` carries ``base_action``,
+``residual_action`` (the scaled residual) and ``total_action`` for every step. A zero residual
+reproduces the base policy exactly (for base policies that return the action space's float32,
+as the roughwalk controllers do). The wrapper is a plain ``gymnasium.Wrapper``, so it works
+with SB3's ``make_vec_env`` (``wrapper_class``), ``VecNormalize``, rl-zoo3's ``env_wrapper``
+and the vector-env adapter.
 """
 
 from __future__ import annotations
@@ -163,7 +163,7 @@ class ResidualWrapper(gym.Wrapper, gym.utils.RecordConstructorArgs):
         total = np.clip(base + residual, self._low, self._high).astype(np.float32)
         obs, reward, terminated, truncated, info = self.env.step(total)
         applied = getattr(self.base_policy, "applied", None)
-        if applied is not None:
+        if applied is not None and not np.array_equal(total, base.astype(np.float32)):
             applied(total)
         info = dict(info)
         info["base_action"] = base.astype(np.float32)

@@ -141,6 +141,13 @@ def test_compare_dry_run_lists_every_row(capsys):
     # 4 terrain settings x (3 baselines + 4 agents)
     assert len(lines) == 4 * 7
     assert "roughwalk train" in table and "--env-kwargs difficulty=2.0" in table
+    assert main(["compare", "--dry-run", "--terrains", "stairs", "rough-hard"]) == 0
+    table = capsys.readouterr().out
+    lines = [ln for ln in table.splitlines() if ln.startswith("| ") and "---" not in ln][1:]
+    assert len(lines) == 2 * 7 and {ln.split("|")[1].strip() for ln in lines} == {
+        "stairs",
+        "rough-hard",
+    }
 
 
 def test_compare_trains_evaluates_and_writes_the_table(tmp_path: Path):
@@ -159,9 +166,20 @@ def test_compare_trains_evaluates_and_writes_the_table(tmp_path: Path):
     )
     assert [(r["setting"], r["policy"]) for r in rows] == [("flat", "passive"), ("flat", "PPO")]
     assert rows[1]["budget"].startswith("256 steps")
+    # no periodic evaluation within 256 steps: the final model is the one evaluated
+    assert str(tmp_path / "runs" / "ppo_flat_s0" / "model.zip") in rows[1]["command"]
     assert (tmp_path / "runs" / "ppo_flat_s0" / "model.zip").is_file()
     table = (tmp_path / "results" / "compare.md").read_text()
     assert "| flat | PPO |" in table and "ppo_flat.yaml --log-dir" in table
     data = json.loads((tmp_path / "results" / "compare.json").read_text())
     assert len(data["evaluations"]) == 2
     assert all(len(e["episodes"]) == 2 for e in data["evaluations"])
+
+
+def test_compare_reports_the_validation_best_model_when_there_is_one(tmp_path: Path):
+    from agents.compare import chosen_model
+
+    (tmp_path / "model.zip").write_text("final")
+    assert chosen_model(tmp_path) == tmp_path / "model.zip"
+    (tmp_path / "best_model.zip").write_text("best on the validation courses")
+    assert chosen_model(tmp_path) == tmp_path / "best_model.zip"
