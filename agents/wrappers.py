@@ -63,7 +63,6 @@ class EstimatedStateObservation(gym.Wrapper, gym.utils.RecordConstructorArgs):
         self.observation_space = spaces.Box(
             low.astype(np.float32), high.astype(np.float32), (5 + n_scan,), np.float32
         )
-        self._u_max = self.estimator.u_max
 
     def _observe(self, obs: np.ndarray, u: float) -> np.ndarray:
         est = self.estimator
@@ -88,5 +87,5 @@ class EstimatedStateObservation(gym.Wrapper, gym.utils.RecordConstructorArgs):
         a = np.asarray(action, dtype=np.float64).reshape(-1)
         obs, reward, terminated, truncated, info = self.env.step(action)
         # the env has checked the action (finite); it applies it clipped to [-1, 1]
-        u = float(np.clip(a[0], -1.0, 1.0)) * self._u_max
+        u = float(np.clip(a[0], -1.0, 1.0)) * self.estimator.u_max
         return self._observe(obs, u), reward, terminated, truncated, info

@@ -862,12 +862,11 @@ class GaitPlanner:
         self._gait: PeriodicGait | None = None  # the gait of the current planning call
         # solutions of step problems already solved (by problem data), and the free coefficients
         # of steps optimised as the second of a pair (warm starts for when they come up)
-        self._memo: dict[tuple, tuple[np.ndarray, bool]] = {}  # (solution, kept unoptimised)
+        self._memo: dict[tuple, np.ndarray] = {}
         self._hints: dict[tuple, np.ndarray] = {}
         self._failed: dict[tuple, dict] = {}  # step problems with no feasible solution found
         self._terrain_key: bytes = b""
         self._horizon = 1
-        self._kept = False  # the last step solved was a kept warm start (see _solve)
         self._chains: dict[tuple, int] = {}  # foothold-chain lengths, see _reach
         self._chain_candidates: dict[tuple, tuple[np.ndarray, str]] = {}  # see _chain_footholds
 
@@ -1093,11 +1092,10 @@ class GaitPlanner:
                 else:
                     x02 = self._hints.get(_hint_key(fh, fx2.foothold), x02)
             ev, ok = None, False
-            mode = "keep" if keep else "reuse"
             if fx2 is not None:
-                ev, ok = self._solve_pair(sm, fx, x0, fx2, x02, mode)
+                ev, ok = self._solve_pair(sm, fx, x0, fx2, x02, keep)
             if not ok:
-                ev, ok = self._solve(sm, fx, x0, mode)
+                ev, ok = self._solve(sm, fx, x0, keep)
             if not self._fresh:
                 self._budget += 1
             if ok:
@@ -1245,9 +1243,9 @@ class GaitPlanner:
             None if fx2 is None else data(fx2),
         )
 
-    def _solve_pair(self, sm, fx, x0, fx2, x02, mode: str = "reuse") -> tuple[dict, bool]:
+    def _solve_pair(self, sm, fx, x0, fx2, x02, keep: bool = False) -> tuple[dict, bool]:
         """SLSQP on the free coefficients of a step and the next one together; returns the
-        first step's evaluation and whether both steps are feasible (``mode``: see
+        first step's evaluation and whether both steps are feasible (``keep``: see
         :meth:`_solve`)."""
         n = x0.size
 
@@ -1259,10 +1257,9 @@ class GaitPlanner:
 
         prob = _BatchProblem(batch)
         key = self._problem_key(sm, fx, fx2)
-        self._kept = False
         if key in self._failed:
             return self._failed[key], False
-        x = self._reuse(prob, key, np.concatenate([x0, x02]), mode)
+        x = self._reuse(prob, key, np.concatenate([x0, x02]), keep)
         if x is not None:
             _, _, e1, r = prob.get(x)
             return _row(e1, r), True
@@ -1271,35 +1268,32 @@ class GaitPlanner:
         _, g, e1, r = prob.get(x)
         ok = bool(np.min(g) >= -1e-7)
         if ok:
-            self._memo[key] = (x, False)
+            self._memo[key] = x
             self._hints[_hint_key(fx2.stance, fx2.foothold)] = x[n:]
         else:
             self._failed[key] = _row(e1, r)
         return _row(e1, r), ok
 
-    def _reuse(self, prob: _BatchProblem, key: tuple, x0: np.ndarray, mode: str):
-        """A solution that needs no optimisation, or None: in modes ``reuse`` and ``keep`` the
-        solution of the same problem solved before (if still feasible), in mode ``keep`` also
-        the warm start ``x0`` if it is feasible (remembered as kept, see ``self._kept``)."""
-        if mode != "fresh" and key in self._memo:
-            x, kept = self._memo[key]
+    def _reuse(self, prob: _BatchProblem, key: tuple, x0: np.ndarray, keep: bool):
+        """A solution that needs no optimisation, or None: the solution of the same problem
+        solved before (if still feasible), and with ``keep`` the warm start ``x0`` if it is
+        feasible (remembered as the problem's solution)."""
+        if key in self._memo:
+            x = self._memo[key]
             if np.min(prob.get(x)[1]) >= -1e-7:
-                self._kept = kept
                 return x
-        if mode == "keep" and np.min(prob.get(x0)[1]) >= -1e-7:
-            self._memo[key] = (np.array(x0, dtype=np.float64), True)
-            self._kept = True
+        if keep and np.min(prob.get(x0)[1]) >= -1e-7:
+            self._memo[key] = np.array(x0, dtype=np.float64)
             return x0
         return None
 
     def _solve(
-        self, sm: _StepModel, fx: _Fixed, x0: np.ndarray, mode: str = "reuse"
+        self, sm: _StepModel, fx: _Fixed, x0: np.ndarray, keep: bool = False
     ) -> tuple[dict, bool]:
         """SLSQP on the free coefficients from ``x0``; from the best point of a coarse global
-        search if that fails. ``mode``: ``reuse`` (a problem solved before is not optimised
-        again), ``keep`` (also a feasible warm start is kept as it is: for look-ahead steps,
-        re-optimised when they become the first step from a state off the plan) or ``fresh``
-        (optimise)."""
+        search if that fails. A problem solved before is not optimised again; with ``keep`` (a
+        look-ahead step, re-optimised when it becomes the first step from a state off the plan)
+        neither is one whose warm start is already feasible."""
 
         def batch(X):
             ev = sm.evaluate_batch(fx, X)
@@ -1312,17 +1306,16 @@ class GaitPlanner:
             return _row(ev, r), bool(np.min(g) >= -1e-7)
 
         key = self._problem_key(sm, fx, None)
-        self._kept = False
         if key in self._failed:
             return self._failed[key], False
-        x = self._reuse(prob, key, x0, mode)
+        x = self._reuse(prob, key, x0, keep)
         if x is not None:
             _, _, evm, r = prob.get(x)
             return _row(evm, r), True
         self._fresh = True
         ev, ok = run(x0)
         if ok:
-            self._memo[key] = (ev["a"][2:-1].copy(), False)
+            self._memo[key] = ev["a"][2:-1].copy()
             return ev, True
         chord = fx.a_last - fx.a0
         base = fx.a0 + chord * np.arange(2, self.config.order) / self.config.order
@@ -1334,7 +1327,7 @@ class GaitPlanner:
         best = max(range(len(samples)), key=lambda i: scores[i])
         ev2, ok2 = run(base + chord * samples[best])
         if ok2:
-            self._memo[key] = (ev2["a"][2:-1].copy(), False)
+            self._memo[key] = ev2["a"][2:-1].copy()
         if ok2 or np.sum(np.minimum(ev2["g"], 0)) > np.sum(np.minimum(ev["g"], 0)):
             ev = ev2
         if not ok2:

@@ -201,6 +201,7 @@ def evaluate_steps(
     mass = S[S_MASS]
     arm = S[S_ARM]
     ret = S[S_RETRACT]
+    al_min = 0.02 * S[S_ALPHA_SCALE]  # alpha floor in the integrals (kept away from 0)
     ph = np.empty(nn)
     dph = np.empty(nn)
     ddph = np.empty(nn)
@@ -214,7 +215,6 @@ def evaluate_steps(
     psi = np.empty(nn)
     thd = np.empty(nn)
     tcum = np.empty(nn)
-    phg = np.empty(nk)
     cfull = np.empty(nk)
     cret = np.empty(nk)
     fxf = np.empty(nk)
@@ -222,7 +222,6 @@ def evaluate_steps(
     fxr = np.empty(nk)
     fyr = np.empty(nk)
     ahead = np.empty(nk)
-    req = np.empty(nk)
     for b in range(nb):
         # constraint and its phase derivatives on the nodes
         for k in range(nn):
@@ -243,10 +242,10 @@ def evaluate_steps(
             al[k] = a_
             be[k] = b_
             ga[k] = g_
-            w[k] = 2.0 * b_ / max(a_, 0.02 * S[S_ALPHA_SCALE])
+            w[k] = 2.0 * b_ / max(a_, al_min)
         _cumint(w, qint, half, kint)
         for k in range(nn):
-            w[k] = -2.0 * ga[k] / max(al[k], 0.02 * S[S_ALPHA_SCALE]) * math.exp(kint[k])
+            w[k] = -2.0 * ga[k] / max(al[k], al_min) * math.exp(kint[k])
         _cumint(w, qint, half, hint)
         for k in range(nn):
             psi[k] = math.exp(-kint[k])
@@ -272,7 +271,7 @@ def evaluate_steps(
         o = offsets
         for k in range(nn):
             f = max(F[b, k], lo)
-            a_safe = max(al[k], 0.02 * S[S_ALPHA_SCALE])
+            a_safe = max(al[k], al_min)
             q1dd, q2dd = rd.nominal_accelerations(a_safe, be[k], ga[k], dph[k], ddph[k], f)
             u = rd.nominal_input(P, ph[k], th[k], dph[k], ddph[k], thd[k])
             U[b, k] = u
@@ -295,7 +294,6 @@ def evaluate_steps(
             s0 = 0.0
             for i in range(m1):
                 s0 += a[b, i] * Bg[k, i]
-            phg[k] = s0
             thg = th0 + span * sg[k]
             x, y = model.swing_foot_position(P, s0, thg, xs, ys, 0.0)
             fxf[k] = x
@@ -312,13 +310,13 @@ def evaluate_steps(
         g_arm = -math.inf
         for k in range(nk):
             rise = min(max((sg[k] - s_arm) / S[S_RAMP], 0.0), 1.0)
-            req[k] = min(clear_req[k], S[S_ARM_CLEAR] + (S[S_CLEAR] - S[S_ARM_CLEAR]) * rise)
+            req = min(clear_req[k], S[S_ARM_CLEAR] + (S[S_CLEAR] - S[S_ARM_CLEAR]) * rise)
             if k < nk - 1:
                 if i_arm >= 0 and k >= i_arm:
-                    G[b, o[3] + k] = (cfull[k] - req[k]) / l
+                    G[b, o[3] + k] = (cfull[k] - req) / l
                 else:
                     G[b, o[3] + k] = (cret[k] - S[S_RET_CLEAR]) / l
-                g_arm = max(g_arm, min(ahead[k] / l, (cfull[k] - req[k]) / l))
+                g_arm = max(g_arm, min(ahead[k] / l, (cfull[k] - req) / l))
         G[b, o[5]] = g_arm
         # the simulator arms the foot as soon as it is ahead (and above the ground): between
         # the grid points around the crossing the full-length foot must already clear the ground
