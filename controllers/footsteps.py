@@ -13,20 +13,10 @@ from collections.abc import Sequence
 from dataclasses import dataclass
 
 import numpy as np
-from numba import njit
 
-from envs.terrain import Terrain, as_terrain, terrain_height
+from envs.terrain import Terrain, as_terrain
 
 __all__ = ["FootholdRules", "TerrainMap", "candidate_footholds", "touchdown_configuration"]
-
-
-@njit(cache=True, error_model="numpy")
-def _heights(tx, ty, x):
-    out = np.empty(x.size)
-    n = tx.size
-    for i in range(x.size):
-        out[i] = terrain_height(tx, ty, n, x[i])
-    return out
 
 
 class TerrainMap:
@@ -80,10 +70,7 @@ class TerrainMap:
 
     def height(self, x: np.ndarray | float) -> np.ndarray | float:
         """Ground height [m] at ``x`` [m] (the upper height on a vertical face)."""
-        if np.ndim(x) == 0:
-            return float(terrain_height(self.xs, self.ys, self.xs.size, float(x)))
-        xa = np.ascontiguousarray(x, dtype=np.float64)
-        return _heights(self.xs, self.ys, xa.ravel()).reshape(xa.shape)
+        return self.terrain.height(x)
 
     def distance_to_feature(self, x: np.ndarray) -> np.ndarray:
         """Distance [m] from each ``x`` to the nearest face or kink (``inf`` if none)."""

@@ -57,6 +57,16 @@ def terrain_height(tx, ty, n, x):
 
 
 @njit(cache=True, error_model="numpy")
+def terrain_heights(tx, ty, x):
+    """:func:`terrain_height` at every entry of the 1-D array ``x`` [m]."""
+    out = np.empty(x.size)
+    n = tx.size
+    for i in range(x.size):
+        out[i] = terrain_height(tx, ty, n, x[i])
+    return out
+
+
+@njit(cache=True, error_model="numpy")
 def terrain_slope(tx, ty, n, x):
     """Slope ``dh/dx`` of the segment under ``x`` (the segment to the right on a vertex)."""
     if n == 1:
@@ -327,10 +337,8 @@ class Terrain:
         n = self.xs.size
         if np.ndim(x) == 0:
             return float(terrain_height(self.xs, self.ys, n, float(x)))
-        xa = np.asarray(x, dtype=np.float64)
-        return np.array([terrain_height(self.xs, self.ys, n, v) for v in xa.ravel()]).reshape(
-            xa.shape
-        )
+        xa = np.ascontiguousarray(x, dtype=np.float64)
+        return terrain_heights(self.xs, self.ys, xa.ravel()).reshape(xa.shape)
 
     def slope_at(self, x: float) -> float:
         """Ground slope ``dh/dx`` of the segment under ``x``."""
