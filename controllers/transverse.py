@@ -51,7 +51,8 @@ class StepModel:
         ground_slope: slope ``dh/dx`` of the ground at the planned foothold (0 on stairs and
             blocks); defines the switching surface used by the impact linearization.
         margin: fraction of the step's span by which the nominal speed profile is extended on
-            both sides (states slightly before ``theta_plus`` or after ``theta_minus``).
+            both sides (states slightly before ``theta_plus`` or after ``theta_minus``); halved
+            (down to 0) while the constraint continued that far would stall the walker.
         n_cheb: Chebyshev grid size of the speed profile.
 
     Raises:
@@ -71,27 +72,38 @@ class StepModel:
         c = self.constraint
         if not (math.isfinite(self.thetadot_plus) and self.thetadot_plus > 0):
             raise ValueError(f"StepModel.thetadot_plus = {self.thetadot_plus!r}; allowed > 0")
-        a = c.theta_plus - self.margin * c.span
-        b = c.theta_minus + self.margin * c.span
-        th = phase_grid(a, b, self.n_cheb)
         # power-basis coefficients of phi in s (exact: phi is a polynomial of this order)
         sn = 0.5 * (1 - np.cos(np.pi * np.arange(c.order + 1) / c.order))
         pc = npoly.polyfit(sn, c.phi(c.theta_plus + sn * c.span), c.order)
         self._pc = (pc, npoly.polyder(pc) / c.span, npoly.polyder(pc, 2) / c.span**2)
-        phi, dphi, ddphi = self.derivatives(th)
-        al, be, ga = reduced_coefficients(self.P, phi, th, dphi, ddphi)
-        if np.any(np.abs(al) < 1e-12):
+        # the constraint continued past the step's ends may be singular or stall the walker
+        # there (a steep polynomial): the margin then halves until neither happens
+        margins = [self.margin * 0.5**k for k in range(4)] + [0.0]
+        mid = 0.5 * (c.theta_plus + c.theta_minus)
+        sign = np.sign(reduced_coefficients(self.P, *self._at(mid))[0])
+        for margin in dict.fromkeys(margins):
+            a = c.theta_plus - margin * c.span
+            b = c.theta_minus + margin * c.span
+            th = phase_grid(a, b, self.n_cheb)
+            phi, dphi, ddphi = self.derivatives(th)
+            al, be, ga = reduced_coefficients(self.P, phi, th, dphi, ddphi)
+            if not np.all(sign * al > 1e-12):
+                continue
+            psi, gam = reduced_integral(th, al, be, ga)
+            # F(theta) = psi(theta, a) Fa + Gam(theta, a), with Fa fixed by F(theta_plus)
+            psi_s, gam_s = ChebyshevSeries(psi, a, b), ChebyshevSeries(gam, a, b)
+            fa = (self.thetadot_plus**2 - gam_s(c.theta_plus)) / psi_s(c.theta_plus)
+            Fv = psi * fa + gam
+            if np.all(Fv > 0):
+                break
+        if not np.all(sign * al > 1e-12):
             raise ValueError("StepModel: alpha(theta) vanishes on the step (singular constraint)")
-        psi, gam = reduced_integral(th, al, be, ga)
-        # F(theta) = psi(theta, a) Fa + Gam(theta, a), with Fa fixed by F(theta_plus)
-        psi_s, gam_s = ChebyshevSeries(psi, a, b), ChebyshevSeries(gam, a, b)
-        fa = (self.thetadot_plus**2 - gam_s(c.theta_plus)) / psi_s(c.theta_plus)
-        Fv = psi * fa + gam
         if np.any(Fv <= 0):
             raise ValueError(
                 "StepModel: the nominal theta_dot^2 is not positive over the step "
                 f"(min {Fv.min():.3g} rad^2/s^2): the walker would stall"
             )
+        self.margin = margin
         self._F = ChebyshevSeries(Fv, a, b)
 
     # ------------------------------------------------------------------ nominal motion
@@ -100,6 +112,10 @@ class StepModel:
         c = self.constraint
         s = (np.asarray(theta, dtype=np.float64) - c.theta_plus) / c.span
         return tuple(npoly.polyval(s, k) for k in self._pc)
+
+    def _at(self, theta: float) -> tuple[float, float, float, float]:
+        phi, dphi, ddphi = self.derivatives(theta)
+        return float(phi), float(theta), float(dphi), float(ddphi)
 
     @property
     def power_coefficients(self) -> np.ndarray:

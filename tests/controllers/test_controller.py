@@ -40,10 +40,11 @@ def state_from_z(step, theta, z):
     return np.array([c.phi(theta) + z[1], theta, c.dphi(theta) * td + z[2], td])
 
 
-def closed_loop(cls, terrain, z0, steps, replan=False, **kwargs):
+def closed_loop(cls, terrain, z0, steps, replan=False, robot="paper", end=None, **kwargs):
     """Plan from the nominal start, start perturbed by ``z0`` in transverse coordinates, run
-    ``steps`` footsteps. Returns (failure, records)."""
-    ctrl = cls("paper", terrain, ControllerConfig(replan=replan, plan_steps=steps + 3), **kwargs)
+    ``steps`` footsteps. Returns (failure, records); ``end`` (a dict) receives the final
+    stance-foot position."""
+    ctrl = cls(robot, terrain, ControllerConfig(replan=replan, plan_steps=steps + 3), **kwargs)
     gait = ctrl.planner.periodic_gait()
     ctrl.reset(gait.q, gait.qd)
     x0 = state_from_z(ctrl.solution.steps[0], gait.q[1], np.asarray(z0, float))
@@ -54,6 +55,8 @@ def closed_loop(cls, terrain, z0, steps, replan=False, **kwargs):
     while len(ctrl.records) <= steps:
         u = ctrl.control(sim.q[0].copy(), sim.qd[0].copy())
         ev = sim.step(b * u)
+        if end is not None:
+            end["stance"] = tuple(sim.stance_foot[0])
         if ev.status[0]:
             return sim.failure(0), ctrl.records
         assert sim.t[0] < 3.0 * steps, "no impact: the walker stalled"
@@ -151,6 +154,21 @@ def test_replanning_walks_rough_terrain_from_perturbed_starts(terrain):
             if r.fallback is None:
                 assert np.abs(r.xperp_start[:2]).max() < 1e-6
             assert r.max_abs_y < 0.05
+
+
+def test_classic_walker_climbs_stairs_from_perturbed_starts():
+    """The classic walker (1 m legs) up two 1 cm rises with replanning at every footstep."""
+    stairs = Terrain.staircase(1.0, 3, 1.0, 0.01)
+    for z0 in ((-0.1, 0.005, -0.1), (0.08, -0.005, 0.1)):
+        end: dict = {}
+        failure, recs = closed_loop(
+            TransverseController, stairs, z0, steps=10, replan=True, robot="classic", end=end
+        )
+        assert failure is None, f"{z0}: {failure}"
+        assert all(r.fallback != "zero input" for r in recs), [r.reason for r in recs]
+        assert max(r.max_abs_y for r in recs) < 0.1
+        assert end["stance"][1] == pytest.approx(0.02)  # on the second tread
+        assert min(r.thetadot_start for r in recs) > 0.5  # never near a stall
 
 
 def test_feedback_law_matches_partial_feedback_linearisation():

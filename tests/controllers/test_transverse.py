@@ -138,3 +138,24 @@ def test_impact_jacobian_matches_flow_impact_flow(chain):
         J[:, i] = (flow_map(e) - flow_map(-e)) / (2 * h)
     assert np.abs(flow_map(np.zeros(3))).max() < 1e-9
     assert np.abs(J - pred).max() < 1e-5 * np.abs(pred).max()
+
+
+def test_margin_shrinks_where_the_continued_constraint_is_singular():
+    """A step onto a 1 cm rise replanned in closed loop (classic walker): its order-6
+    constraint continued 15 % past theta- makes alpha change sign; the extension shrinks
+    instead of the step being rejected, and the profile on the step is unchanged."""
+    from controllers.bezier import BezierConstraint
+    from controllers.transverse import StepModel
+    from envs.params import RobotParams
+
+    P = RobotParams.from_preset("classic").vector()
+    a = [-0.29102594500881324, -0.2640678151438681, 0.0928026563809734, 1.3565597272147574]
+    a += [0.13804921681533533, 0.30097754751602745, 0.273031028035243]
+    c = BezierConstraint(np.array(a), -0.14551297250440662, 0.09976735897462588)
+    m = StepModel(P, c, 0.7753035964756947, margin=0.15)
+    assert 0.0 < m.margin < 0.15
+    th = np.linspace(c.theta_plus - m.margin * c.span, c.theta_minus + m.margin * c.span, 501)
+    assert np.all(m.thetadot_sq(th) > 0)
+    ref = StepModel(P, c, 0.7753035964756947, margin=0.0)
+    on = np.linspace(c.theta_plus, c.theta_minus, 201)
+    np.testing.assert_allclose(m.thetadot_sq(on), ref.thetadot_sq(on), atol=1e-6)
