@@ -758,6 +758,7 @@ class _BatchProblem:
     def __init__(self, fn):
         self.fn = fn
         self.cache: dict[bytes, tuple[float, np.ndarray, Any, int]] = {}
+        self._jac: dict[bytes, tuple[np.ndarray, np.ndarray]] = {}
 
     def _fill(self, X: np.ndarray) -> None:
         keys = [x.tobytes() for x in X]
@@ -782,6 +783,10 @@ class _BatchProblem:
 
     def _jacobians(self, x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         x = np.ascontiguousarray(x, dtype=np.float64)
+        key = x.tobytes()
+        hit = self._jac.get(key)
+        if hit is not None:  # SLSQP asks for the cost's and the constraints' at each point
+            return hit
         X = np.vstack([x, x + _FD_STEP * np.eye(x.size)])
         rows = self.evaluate_many(X)
         h = np.diag(X[1:]) - x  # the steps actually taken
@@ -790,9 +795,11 @@ class _BatchProblem:
             dc = np.array([r[0] - c0 for r in rows[1:]]) / h
             dg = np.stack([r[1] - g0 for r in rows[1:]], axis=1) / h
         # a point where the step model breaks down (NaN mapped to +-1e3) gives huge slopes
-        return np.nan_to_num(dc, posinf=1e12, neginf=-1e12), np.nan_to_num(
-            dg, posinf=1e12, neginf=-1e12
-        )
+        for d in (dc, dg):
+            d[np.isnan(d)] = 0.0
+            np.clip(d, -1e12, 1e12, out=d)
+        self._jac[key] = dc, dg
+        return dc, dg
 
     def _with_jacobian_points(self, x: np.ndarray) -> tuple[float, np.ndarray, Any, int]:
         """:meth:`get`, evaluating the forward-difference points around ``x`` in the same
