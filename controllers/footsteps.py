@@ -13,8 +13,9 @@ from collections.abc import Sequence
 from dataclasses import dataclass
 
 import numpy as np
+from numba import njit
 
-from envs.terrain import Terrain, as_terrain
+from envs.terrain import Terrain, as_terrain, terrain_height
 
 __all__ = ["FootholdRules", "TerrainMap", "candidate_footholds", "touchdown_configuration"]
 
@@ -31,6 +32,8 @@ class TerrainMap:
         self.xs, self.ys = self.terrain.arrays()
         self.features = self.terrain.edges()
         self.faces = self.terrain.vertical_faces()
+        self._face_arr = np.array(self.faces, dtype=np.float64).reshape(-1, 3)
+        self._face_x = np.ascontiguousarray(self._face_arr[:, 0])
 
     @classmethod
     def from_scan(
@@ -84,7 +87,13 @@ class TerrainMap:
 
     def faces_between(self, x0: float, x1: float) -> list[tuple[float, float]]:
         """Vertical faces strictly between ``x0`` and ``x1`` as ``(x, top height)``."""
-        return [(x, max(a, b)) for x, a, b in self.faces if x0 < x < x1]
+        return [(x, max(a, b)) for x, a, b in self.faces_within(x0, x1) if x0 < x < x1]
+
+    def faces_within(self, x0: float, x1: float) -> list[tuple[float, float, float]]:
+        """Vertical faces ``(x, y_before, y_after)`` with ``x0 <= x <= x1`` [m], in order."""
+        i = int(np.searchsorted(self._face_x, x0, side="left"))
+        j = int(np.searchsorted(self._face_x, x1, side="right"))
+        return self.faces[i:j]
 
 
 @dataclass(frozen=True)
@@ -178,45 +187,104 @@ def candidate_footholds(
         ``(x, y, reason)``: candidate foothold coordinates [m], best first (empty if none),
         and why candidates were rejected when empty.
     """
-    x0, y0 = stance
+    x0, y0 = float(stance[0]), float(stance[1])
     n = int(math.floor((rules.step_max - rules.step_min) / rules.resolution)) + 1
-    x = x0 + rules.step_min + rules.resolution * np.arange(n)
-    y = tmap.height(x)
-    dh = y - y0
-    q1, q2 = touchdown_configuration(x - x0, dh, l)
-    ok_edge = tmap.distance_to_feature(x) >= rules.edge_margin
-    for xf, ya, yb in tmap.faces:
-        if x0 < xf and ya > yb:  # a step down between the stance foot and the candidates
-            ok_edge &= (x <= xf) | (x - xf >= rules.edge_margin + rules.drop_margin * (ya - yb))
-        if 0 < yb - ya <= rules.max_rise:  # a step up ahead of the candidates (not a wall)
-            ok_edge &= (x >= xf) | (xf - x >= rules.edge_margin + rules.rise_margin * (yb - ya))
-    ok_h = (dh <= rules.max_rise) & (dh >= -rules.max_drop)
-    with np.errstate(invalid="ignore"):
-        ok_reach = (q1 >= rules.q1_min) & (q1 <= rules.q1_max)
-    ok = ok_edge & ok_h & ok_reach
-    if not np.any(ok):
-        reasons = []
-        if not np.any(ok_edge):
-            reasons.append(f"no ground {rules.edge_margin} m away from an edge")
-        if not np.any(ok_h & ok_edge):
-            reasons.append(
-                f"height change outside [-{rules.max_drop}, {rules.max_rise}] m "
-                f"(range seen {dh.min():.3g} .. {dh.max():.3g} m)"
-            )
-        if not np.any(ok_reach & ok_edge):
-            reasons.append(f"inter-leg angle at touchdown outside [{rules.q1_min}, {rules.q1_max}]")
-        return (
-            np.zeros(0),
-            np.zeros(0),
-            "no admissible foothold within step length "
-            f"[{rules.step_min}, {rules.step_max}] m: " + "; ".join(reasons or ["rules"]),
+    mode = 0 if theta_target is None else (1 if sigma_target is None else 2)
+    x, y, seen = _foothold_table(
+        x0, y0, n, rules.step_min, rules.resolution, tmap.xs, tmap.ys, tmap.features,
+        tmap._face_arr, rules.edge_margin, rules.drop_margin, rules.rise_margin,
+        rules.max_rise, rules.max_drop, rules.q1_min, rules.q1_max, float(l), rules.step_length,
+        math.nan if theta_target is None else float(theta_target),
+        math.nan if sigma_target is None else float(sigma_target), mode,
+    )  # fmt: skip
+    if x.size:
+        return x, y, ""
+    any_edge, any_height, any_reach, dh_min, dh_max = seen
+    reasons = []
+    if not any_edge:
+        reasons.append(f"no ground {rules.edge_margin} m away from an edge")
+    if not any_height:
+        reasons.append(
+            f"height change outside [-{rules.max_drop}, {rules.max_rise}] m "
+            f"(range seen {dh_min:.3g} .. {dh_max:.3g} m)"
         )
-    if theta_target is None:
-        score = np.abs(x - x0 - rules.step_length)
-    else:
-        score = np.abs(q2 - theta_target) + 0.1 * np.abs(x - x0 - rules.step_length) / l
-        if sigma_target is not None:
-            score = score + 2.0 * np.abs(q2 - q1 - sigma_target)
-    x, y, score = x[ok], y[ok], score[ok]
-    order = np.argsort(score, kind="stable")
-    return x[order], y[order], ""
+    if not any_reach:
+        reasons.append(f"inter-leg angle at touchdown outside [{rules.q1_min}, {rules.q1_max}]")
+    return (
+        np.zeros(0),
+        np.zeros(0),
+        "no admissible foothold within step length "
+        f"[{rules.step_min}, {rules.step_max}] m: " + "; ".join(reasons or ["rules"]),
+    )
+
+
+@njit(cache=True, error_model="numpy")
+def _foothold_table(
+    x0, y0, n, step_min, res, tx, ty, features, faces, edge_margin, drop_margin, rise_margin,
+    max_rise, max_drop, q1_min, q1_max, l, step_length, theta_target, sigma_target, mode,
+):  # fmt: skip
+    """The admissible footholds among ``x0 + step_min + res * k`` (``x, y`` best first) and what
+    was seen: whether any candidate is away from edges, also within the height bounds, also
+    within reach, and the range of height changes (see :func:`candidate_footholds`; ``mode`` 0
+    ranks by step length, 1 adds ``theta_target``, 2 also ``sigma_target``)."""
+    x = np.empty(n)
+    y = np.empty(n)
+    dh = np.empty(n)
+    score = np.empty(n)
+    ok_edge = np.empty(n, dtype=np.bool_)
+    ok_h = np.empty(n, dtype=np.bool_)
+    ok_reach = np.empty(n, dtype=np.bool_)
+    nt, nf = tx.size, features.size
+    reach = x0 + step_min + res * (n - 1) + edge_margin + rise_margin * max_rise
+    for k in range(n):
+        xk = x0 + step_min + res * k
+        yk = terrain_height(tx, ty, nt, xk)
+        d = yk - y0
+        x[k], y[k], dh[k] = xk, yk, d
+        # distance to the nearest face or kink
+        near = np.inf
+        if nf > 0:
+            i = np.searchsorted(features, xk)
+            left = features[min(max(i - 1, 0), nf - 1)]
+            right = features[min(max(i, 0), nf - 1)]
+            near = min(abs(xk - left), abs(right - xk))
+        ok = near >= edge_margin
+        for f in range(faces.shape[0]):
+            xf, ya, yb = faces[f, 0], faces[f, 1], faces[f, 2]
+            if xf < x0 or xf > reach:
+                continue
+            if x0 < xf and ya > yb:  # a step down between the stance foot and the candidate
+                ok = ok and (xk <= xf or xk - xf >= edge_margin + drop_margin * (ya - yb))
+            if 0 < yb - ya <= max_rise:  # a step up ahead of the candidate (not a wall)
+                ok = ok and (xk >= xf or xf - xk >= edge_margin + rise_margin * (yb - ya))
+        ok_edge[k] = ok
+        ok_h[k] = d <= max_rise and d >= -max_drop
+        # touchdown configuration (see touchdown_configuration)
+        dx = xk - x0
+        chord = math.hypot(dx, d) / (2.0 * l)
+        q1 = 2.0 * math.asin(chord) if chord <= 1.0 else np.nan
+        q2 = math.atan2(-d, dx) + 0.5 * q1
+        ok_reach[k] = q1 >= q1_min and q1 <= q1_max
+        if mode == 0:
+            score[k] = abs(dx - step_length)
+        else:
+            score[k] = abs(q2 - theta_target) + 0.1 * abs(dx - step_length) / l
+            if mode == 2:
+                score[k] += 2.0 * abs(q2 - q1 - sigma_target)
+    # admissible candidates by score, ties in order of x (a stable insertion sort)
+    order = np.empty(n, dtype=np.int64)
+    m = 0
+    for k in range(n):
+        if ok_edge[k] and ok_h[k] and ok_reach[k]:
+            i = m
+            while i > 0 and score[order[i - 1]] > score[k]:
+                order[i] = order[i - 1]
+                i -= 1
+            order[i] = k
+            m += 1
+    seen = np.zeros(5)
+    seen[0] = 1.0 if np.any(ok_edge) else 0.0
+    seen[1] = 1.0 if np.any(ok_edge & ok_h) else 0.0
+    seen[2] = 1.0 if np.any(ok_edge & ok_reach) else 0.0
+    seen[3], seen[4] = dh.min(), dh.max()
+    return x[order[:m]], y[order[:m]], seen

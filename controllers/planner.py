@@ -44,6 +44,7 @@ robot's input units (torque ``kI ktau u``).
 
 from __future__ import annotations
 
+import functools
 import math
 import time
 from dataclasses import asdict, dataclass, fields, replace
@@ -223,6 +224,9 @@ class PlannerConfig:
 
     def rules(self) -> FootholdRules:
         """The foothold rules of this configuration."""
+        return _rules(self)
+
+    def _make_rules(self) -> FootholdRules:
         return FootholdRules(
             step_length=self.step_length,
             step_min=self.step_min,
@@ -260,6 +264,11 @@ class PlannerConfig:
     def from_yaml(cls, path: str | Path) -> PlannerConfig:
         with open(path) as fh:
             return cls.from_dict(yaml.safe_load(fh) or {})
+
+
+@functools.lru_cache(maxsize=64)
+def _rules(config: PlannerConfig) -> FootholdRules:
+    return config._make_rules()
 
 
 # ---------------------------------------------------------------------------- plan objects
@@ -787,7 +796,7 @@ class _BatchProblem:
         hit = self._jac.get(key)
         if hit is not None:  # SLSQP asks for the cost's and the constraints' at each point
             return hit
-        X = np.vstack([x, x + _FD_STEP * np.eye(x.size)])
+        X = _fd_points(x)
         rows = self.evaluate_many(X)
         h = np.diag(X[1:]) - x  # the steps actually taken
         c0, g0 = rows[0][0], rows[0][1]
@@ -808,7 +817,7 @@ class _BatchProblem:
         x = np.ascontiguousarray(x, dtype=np.float64)
         key = x.tobytes()
         if key not in self.cache:
-            self._fill(np.vstack([x, x + _FD_STEP * np.eye(x.size)]))
+            self._fill(_fd_points(x))
         return self.cache[key]
 
     def minimize(self, x0: np.ndarray, maxiter: int, ftol: float) -> np.ndarray:
@@ -828,6 +837,15 @@ class _BatchProblem:
             options={"maxiter": maxiter, "ftol": ftol},
         )
         return np.asarray(res.x)
+
+
+def _fd_points(x: np.ndarray) -> np.ndarray:
+    """``x`` and its ``k`` forward-difference neighbours (rows)."""
+    k = x.size
+    X = np.empty((k + 1, k))
+    X[:] = x
+    X[1:] += _FD_STEP * np.eye(k)
+    return X
 
 
 def _row(ev: dict[str, Any], r: int) -> dict[str, Any]:
