@@ -1057,12 +1057,19 @@ class GaitPlanner:
         as the last item says why the others failed."""
         cfg, l = self.config, self.params.l  # noqa: E741
         th_p, a0, slope, thd = start
-        cx, cy, why = self._candidates(tmap, stance, th_p, self._horizon - 1 - j)
+        # warm start: the previous plan's step from (nearly) the same stance foot
+        warm = [p for p in prev if abs(p.stance_foot[0] - stance[0]) < 1e-3]
+        cx, cy, why = self._candidates(
+            tmap,
+            stance,
+            th_p,
+            self._horizon - 1 - j,
+            warm[0].foothold[0] if warm else None,
+            cfg.candidates,
+        )
         if cx.size == 0:
             yield PlanningError(j, "foothold", why)
             return
-        # warm start: the previous plan's step from (nearly) the same stance foot
-        warm = [p for p in prev if abs(p.stance_foot[0] - stance[0]) < 1e-3]
         order: list[int] = []
         if warm:
             k = np.nonzero(np.abs(cx - warm[0].foothold[0]) < cfg.rules().resolution)[0]
@@ -1137,13 +1144,24 @@ class GaitPlanner:
         )
 
     def _candidates(
-        self, tmap: TerrainMap, stance: tuple[float, float], theta_plus: float, depth: int
+        self,
+        tmap: TerrainMap,
+        stance: tuple[float, float],
+        theta_plus: float,
+        depth: int,
+        warm_x: float | None = None,
+        need: int | None = None,
     ) -> tuple[np.ndarray, np.ndarray, str]:
         """Candidate footholds from ``stance`` ranked as :func:`candidate_footholds` does, with
         those from which a chain of ``depth`` more admissible footholds exists first, and among
         them those that keep such a chain when the foot lands further off (``_LANDING_SLACK``; on
         stairs the admissible footholds form narrow windows; a foothold on the edge of its
-        window leaves no next step once the actual touchdown misses it by a millimetre)."""
+        window leaves no next step once the actual touchdown misses it by a millimetre).
+
+        With ``need``, candidates are ranked only until the first ``need`` footholds the search
+        tries are settled (the foothold matching ``warm_x`` [m], then candidates spaced by
+        ``candidate_spacing`` in list order, as :meth:`_step_options` picks them); the rest
+        follow unranked, in the order of :func:`candidate_footholds`."""
         cfg, l = self.config, self.params.l  # noqa: E741
         cx, cy, why = candidate_footholds(
             tmap, stance, cfg.rules(), l, self._theta_target(theta_plus), self._gait.step.theta_plus
@@ -1156,17 +1174,42 @@ class GaitPlanner:
         f = tmap.features
         if not np.any((f > stance[0] - cfg.step_max) & (f < reach)):
             return cx, cy, why
-        rank = np.zeros(cx.size)
-        for k, x in enumerate(cx):
-            if not self._chain(tmap, x, depth):
-                rank[k] = len(_LANDING_SLACK) + 1
+        rank = np.full(cx.size, -1)  # -1: not ranked
+        picks: list[float] = []
+        if need is not None and warm_x is not None:
+            res = cfg.rules().resolution
+            near = np.nonzero(np.abs(cx - warm_x) < res)[0]
+            for k in near:
+                rank[k] = self._landing_rank(tmap, float(cx[k]), depth)
+            if near.size:  # the first match in the ranked list
+                picks.append(float(cx[min(near, key=lambda k: (rank[k], k))]))
+        for k in range(cx.size):
+            if rank[k] < 0:
+                rank[k] = self._landing_rank(tmap, float(cx[k]), depth)
+            if need is None or rank[k] != 0:
                 continue
-            for s in _LANDING_SLACK:  # largest landing error the chain tolerates, first
-                if self._chain(tmap, x - s, depth) and self._chain(tmap, x + s, depth):
+            if all(abs(cx[k] - p) >= cfg.candidate_spacing for p in picks):
+                picks.append(float(cx[k]))
+                if len(picks) >= need:  # the rest cannot come before these
                     break
-                rank[k] += 1
-        order = np.argsort(rank, kind="stable")
+        done = rank >= 0
+        order = np.r_[
+            np.nonzero(done)[0][np.argsort(rank[done], kind="stable")], np.nonzero(~done)[0]
+        ]
         return cx[order], cy[order], why
+
+    def _landing_rank(self, tmap: TerrainMap, x: float, depth: int) -> int:
+        """0 if a chain of ``depth`` footholds continues from ``x`` [m] however far the foot
+        lands off by up to the largest ``_LANDING_SLACK``, 1 for the next smaller slack, ...,
+        ``len(_LANDING_SLACK)`` with no slack, one more without any chain."""
+        if not self._chain(tmap, x, depth):
+            return len(_LANDING_SLACK) + 1
+        r = 0
+        for s in _LANDING_SLACK:  # largest landing error the chain tolerates, first
+            if self._chain(tmap, x - s, depth) and self._chain(tmap, x + s, depth):
+                break
+            r += 1
+        return r
 
     def _chain(self, tmap: TerrainMap, x: float, depth: int) -> bool:
         """Whether ``depth`` consecutive admissible footholds exist from a stance foot at ``x``
@@ -1240,7 +1283,7 @@ class GaitPlanner:
         """The step after a step ending on ``fh`` (its start speed left open), or None."""
         cfg, l = self.config, self.params.l  # noqa: E741
         th_p2 = q2m - q1m
-        cx, cy, _ = self._candidates(tmap, fh, th_p2, 1)
+        cx, cy, _ = self._candidates(tmap, fh, th_p2, 1, None, 1)
         if cx.size == 0:
             return None
         fh2 = (float(cx[0]), float(cy[0]))
