@@ -585,6 +585,7 @@ class _StepModel:
         self.wscale = 1.0  # scale of the weights that pull a step towards the gait
         self._qint = np.ascontiguousarray(rd.cumulative_integral_matrix(n))
         self._face_cache: dict[tuple, tuple[Any, ...]] = {}
+        self._layouts: dict[tuple, tuple[np.ndarray, int]] = {}  # constraint layouts
         S = np.zeros(sk.S_COUNT)
         S[sk.S_MIN_THD] = config.min_thetadot
         S[sk.S_ALPHA_SCALE] = self.alpha_scale
@@ -681,8 +682,15 @@ class _StepModel:
         span = fx.theta_minus - fx.theta_plus
         xs, ys = fx.stance
         face_x, face_top, face_full, slope_stance, slope_foot = self._faces(xs, fx.foothold[0])
-        sizes = sk.group_sizes(self.s.size, self.sg.size, face_x.size, periodic)
-        offsets = np.concatenate([[0], np.cumsum(sizes)]).astype(np.int64)
+        layout = self._layouts.get((face_x.size, periodic))
+        if layout is None:
+            sizes = sk.group_sizes(self.s.size, self.sg.size, face_x.size, periodic)
+            offsets = np.concatenate([[0], np.cumsum(sizes)]).astype(np.int64)
+            layout = self._layouts[face_x.size, periodic] = (
+                offsets,
+                sk.packed_size(sizes, _PACK_BLOCK),
+            )
+        offsets, n_packed = layout
         S = self._settings.copy()
         S[sk.S_FMIN] = (
             max(cfg.min_thetadot, cfg.gait_min_thetadot) ** 2 if periodic else cfg.min_thetadot**2
@@ -715,8 +723,8 @@ class _StepModel:
             self.clear_req, self.tmap.xs, self.tmap.ys, face_x, face_top, face_full,
             np.ascontiguousarray(shape_ref, dtype=np.float64), offsets, G, R, F, U,
         )  # fmt: skip
-        groups = [G[:, offsets[i] : offsets[i + 1]] for i in range(len(sizes))]
-        g = np.empty((nb, sk.packed_size(sizes, _PACK_BLOCK)))
+        groups = _Groups(G, offsets)
+        g = np.empty((nb, n_packed))
         sk.pack(G, offsets, _PACK_BLOCK, g)
         return {
             "a": a,
@@ -734,6 +742,22 @@ class _StepModel:
             "thetadot_plus": R[:, sk.R_THD_PLUS],
             "gain": R[:, sk.R_GAIN],
         }
+
+
+class _Groups:
+    """The constraint groups of a batched evaluation: column blocks of ``G``, sliced on use."""
+
+    def __init__(self, G: np.ndarray, offsets: np.ndarray):
+        self.G, self.offsets = G, offsets
+
+    def __len__(self) -> int:
+        return self.offsets.size - 1
+
+    def __getitem__(self, i: int) -> np.ndarray:
+        return self.G[:, self.offsets[i] : self.offsets[i + 1]]
+
+    def __iter__(self):
+        return (self[i] for i in range(len(self)))
 
 
 def _violations(groups: list[np.ndarray]) -> tuple[float, str]:
