@@ -776,6 +776,10 @@ _CHAIN_STRIDE = 4  # candidates tried first when looking for a chain (then all o
 _LANDING_SLACK = (0.008, 0.004)  # touchdown errors a foothold chain should tolerate [m]
 _PACK_BLOCK = 8  # long constraint groups reach SLSQP as minima over blocks of grid points
 _FTOL = 1e-7  # SLSQP tolerance on the cost of a step problem
+# an SLSQP run still infeasible after _STALL_ITERATIONS iterations (violation, the sum of the
+# negative constraints, above _STALL_VIOLATION) stops once its last _STALL_WINDOW iterations
+# brought the violation below _STALL_GAIN times its earlier best no more
+_STALL_ITERATIONS, _STALL_WINDOW, _STALL_GAIN, _STALL_VIOLATION = 15, 5, 0.95, 1e-4
 _FD_STEP = math.sqrt(np.finfo(float).eps)  # forward-difference step of the Jacobians
 
 
@@ -844,11 +848,27 @@ class _BatchProblem:
             self._fill(_fd_points(x))
         return self.cache[key]
 
-    def minimize(self, x0: np.ndarray, maxiter: int, ftol: float) -> np.ndarray:
-        """SLSQP from ``x0``; returns the final point."""
+    def minimize(
+        self, x0: np.ndarray, maxiter: int, ftol: float, stall: bool = False
+    ) -> np.ndarray:
+        """SLSQP from ``x0``; returns the final point. With ``stall``, a run that stops making
+        progress towards feasibility ends early (see ``_STALL_ITERATIONS``)."""
+        hist: list[float] = []  # constraint violation after each iteration
+
+        def stop_when_stalled(intermediate_result):
+            if not stall:
+                return
+            g = self.get(intermediate_result.x)[1]
+            hist.append(float(-np.sum(np.minimum(g, 0.0))))
+            w = _STALL_WINDOW
+            if len(hist) >= _STALL_ITERATIONS and hist[-1] > _STALL_VIOLATION:
+                if min(hist[-w:]) > _STALL_GAIN * min(hist[:-w]):  # no progress to feasibility
+                    raise StopIteration
+
         res = minimize(
             lambda x: self._with_jacobian_points(x)[0],
             np.asarray(x0, dtype=np.float64),
+            callback=stop_when_stalled,
             jac=lambda x: self._jacobians(x)[0],
             method="SLSQP",
             constraints=[
@@ -1043,6 +1063,10 @@ class GaitPlanner:
         self._budget = 3 * H + 2 * cfg.candidates
         self._fresh = False
         self._deepest: PlanningError | None = None
+        # a step optimisation of this call has failed: from then on, when replanning (the
+        # previous plan is there to fall back on), stalled SLSQP runs end early
+        self._struggling = False
+        self._may_stall = previous_plan is not None
         reach = self._reach(tmap, stance[0], H)
         if reach < H:  # no chain of admissible footholds that long: no search can succeed
             raise PlanningError(reach, "foothold", self._reach_break(tmap, stance[0], H))
@@ -1356,7 +1380,7 @@ class GaitPlanner:
             _, _, e1, r = prob.get(x)
             return _row(e1, r), True
         self._fresh = True
-        x = prob.minimize(np.concatenate([x0, x02]), self.config.max_iter, _FTOL)
+        x = prob.minimize(np.concatenate([x0, x02]), self.config.max_iter, _FTOL, self._struggling)
         _, g, e1, r = prob.get(x)
         ok = bool(np.min(g) >= -1e-7)
         if ok:
@@ -1364,6 +1388,7 @@ class GaitPlanner:
             self._hints[_hint_key(fx2.stance, fx2.foothold)] = x[n:]
         else:
             self._failed[key] = _row(e1, r)
+            self._struggling = self._may_stall
         return _row(e1, r), ok
 
     def _reuse(self, prob: _BatchProblem, key: tuple, x0: np.ndarray, keep: bool):
@@ -1394,7 +1419,7 @@ class GaitPlanner:
         prob = _BatchProblem(batch)
 
         def run(xs):
-            _, g, ev, r = prob.get(prob.minimize(xs, self.config.max_iter, _FTOL))
+            _, g, ev, r = prob.get(prob.minimize(xs, self.config.max_iter, _FTOL, self._struggling))
             return _row(ev, r), bool(np.min(g) >= -1e-7)
 
         key = self._problem_key(sm, fx, None)
@@ -1424,6 +1449,7 @@ class GaitPlanner:
             ev = ev2
         if not ok2:
             self._failed[key] = ev
+            self._struggling = self._may_stall
         return ev, ok2
 
 
