@@ -779,7 +779,7 @@ _FTOL = 1e-7  # SLSQP tolerance on the cost of a step problem
 # an SLSQP run still infeasible after _STALL_ITERATIONS iterations (violation, the sum of the
 # negative constraints, above _STALL_VIOLATION) stops once its last _STALL_WINDOW iterations
 # brought the violation below _STALL_GAIN times its earlier best no more
-_STALL_ITERATIONS, _STALL_WINDOW, _STALL_GAIN, _STALL_VIOLATION = 15, 5, 0.95, 1e-4
+_STALL_ITERATIONS, _STALL_WINDOW, _STALL_GAIN, _STALL_VIOLATION = 25, 5, 0.95, 1e-4
 _FD_STEP = math.sqrt(np.finfo(float).eps)  # forward-difference step of the Jacobians
 
 

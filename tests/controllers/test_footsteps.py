@@ -1,0 +1,83 @@
+"""Foothold selection: the rules, checked one by one against a plain rendering of them."""
+
+import math
+
+import numpy as np
+import pytest
+
+from controllers.footsteps import TerrainMap, candidate_footholds, touchdown_configuration
+from controllers.planner import PlannerConfig
+from envs.terrain import Terrain
+
+TERRAINS = {
+    "flat": Terrain.flat(),
+    "blocks": Terrain.random_blocks(3, 0.3, 3.0, (0.1, 0.3), (-0.015, 0.015)),
+    "stairs_up": Terrain.staircase(0.4, 3, 0.3, 0.01),
+    "stairs_down": Terrain.stairs([0.4, 0.62], [-0.01, -0.01]),
+    "slope": Terrain.slope(-0.0525),
+}
+
+
+def admissible(tmap, stance, rules, l):  # noqa: E741
+    """The rules of :func:`candidate_footholds`, written out point by point."""
+    x0, y0 = stance
+    n = int(math.floor((rules.step_max - rules.step_min) / rules.resolution)) + 1
+    out = []
+    for k in range(n):
+        x = x0 + rules.step_min + rules.resolution * k
+        y = float(tmap.height(x))
+        dh = y - y0
+        if tmap.features.size and np.min(np.abs(tmap.features - x)) < rules.edge_margin:
+            continue
+        if not -rules.max_drop <= dh <= rules.max_rise:
+            continue
+        q1, _ = touchdown_configuration(x - x0, dh, l)
+        if not rules.q1_min <= q1 <= rules.q1_max:
+            continue
+        ok = True
+        for xf, ya, yb in tmap.faces:
+            drop, rise = ya - yb, yb - ya
+            if x0 < xf < x and drop > 0:  # room behind the foothold after a step down
+                ok &= x - xf >= rules.edge_margin + rules.drop_margin * drop
+            if x < xf and 0 < rise <= rules.max_rise:  # room before a step up ahead
+                ok &= xf - x >= rules.edge_margin + rules.rise_margin * rise
+        if ok:
+            out.append((x, y, abs(x - x0 - rules.step_length)))
+    return out
+
+
+@pytest.mark.parametrize("terrain", list(TERRAINS))
+@pytest.mark.parametrize("robot,l", [("paper", 0.32), ("classic", 1.0)])
+def test_candidates_follow_the_rules(robot, l, terrain):  # noqa: E741
+    rules = PlannerConfig.for_robot(robot).rules()
+    tmap = TerrainMap(TERRAINS[terrain])
+    rng = np.random.default_rng(0)
+    for x0 in rng.uniform(-0.1, 2.5 if l < 1 else 4.0, 40):
+        stance = (float(x0), float(tmap.height(x0)))
+        cx, cy, why = candidate_footholds(tmap, stance, rules, l)
+        ref = admissible(tmap, stance, rules, l)
+        np.testing.assert_allclose(np.sort(cx), [r[0] for r in ref], atol=1e-12)
+        np.testing.assert_allclose(cy, tmap.height(cx), atol=0)
+        score = np.abs(cx - x0 - rules.step_length)
+        assert np.all(np.diff(score) >= -1e-12)  # best first
+        assert (cx.size == 0) == (why != "")
+
+
+def test_ranking_by_touchdown_angle():
+    rules = PlannerConfig.for_robot("paper").rules()
+    tmap = TerrainMap(TERRAINS["blocks"])
+    stance = (0.5, float(tmap.height(0.5)))
+    target = 0.2
+    cx, cy, _ = candidate_footholds(tmap, stance, rules, 0.32, target, -0.2)
+    q1, q2 = touchdown_configuration(cx - stance[0], cy - stance[1], 0.32)
+    score = np.abs(q2 - target) + 0.1 * np.abs(cx - stance[0] - rules.step_length) / 0.32
+    score += 2.0 * np.abs(q2 - q1 + 0.2)
+    assert np.all(np.diff(score) >= -1e-12)
+
+
+def test_no_foothold_says_why():
+    rules = PlannerConfig.for_robot("paper").rules()
+    wall = TerrainMap(Terrain.stairs([0.05], [0.5]))
+    cx, cy, why = candidate_footholds(wall, (0.0, 0.0), rules, 0.32)
+    assert cx.size == 0 and cy.size == 0
+    assert "no admissible foothold" in why and "height change" in why
