@@ -856,8 +856,6 @@ class _BatchProblem:
         hist: list[float] = []  # constraint violation after each iteration
 
         def stop_when_stalled(intermediate_result):
-            if not stall:
-                return
             g = self.get(intermediate_result.x)[1]
             hist.append(float(-np.sum(np.minimum(g, 0.0))))
             w = _STALL_WINDOW
@@ -868,7 +866,7 @@ class _BatchProblem:
         res = minimize(
             lambda x: self._with_jacobian_points(x)[0],
             np.asarray(x0, dtype=np.float64),
-            callback=stop_when_stalled,
+            callback=stop_when_stalled if stall else None,
             jac=lambda x: self._jacobians(x)[0],
             method="SLSQP",
             constraints=[
@@ -1107,7 +1105,7 @@ class GaitPlanner:
         th_p, a0, slope, thd = start
         # warm start: the previous plan's step from (nearly) the same stance foot
         warm = [p for p in prev if abs(p.stance_foot[0] - stance[0]) < 1e-3]
-        cx, cy, why = self._candidates(
+        cx, cy, order, why = self._candidates(
             tmap,
             stance,
             th_p,
@@ -1118,16 +1116,6 @@ class GaitPlanner:
         if cx.size == 0:
             yield PlanningError(j, "foothold", why)
             return
-        order: list[int] = []
-        if warm:
-            k = np.nonzero(np.abs(cx - warm[0].foothold[0]) < cfg.rules().resolution)[0]
-            if k.size:
-                order.append(int(k[0]))
-        for i in range(cx.size):
-            if len(order) >= cfg.candidates:
-                break
-            if all(abs(cx[i] - cx[o]) >= cfg.candidate_spacing for o in order):
-                order.append(i)
         best_fail: tuple[float, str, str] = (-math.inf, "", "")
         # Rounds over the candidate footholds, each reached only when the steps planned after
         # the previous round's options failed: (1) the configured cost; (2) ten times the weight
@@ -1181,7 +1169,6 @@ class GaitPlanner:
             if ok:
                 c = BezierConstraint(ev["a"], th_p, q2m)
                 yield StepPlan(j, self.P, c, thd, stance, fh, cfg.grid, ev["arm_theta"])
-            if ok:
                 continue
             worst, name = _violations(ev["groups"])
             best_fail = max(best_fail, (worst, name, f"foothold x = {fh[0]:.3f} m"))
@@ -1197,54 +1184,63 @@ class GaitPlanner:
         stance: tuple[float, float],
         theta_plus: float,
         depth: int,
-        warm_x: float | None = None,
-        need: int | None = None,
-    ) -> tuple[np.ndarray, np.ndarray, str]:
+        warm_x: float | None,
+        need: int,
+    ) -> tuple[np.ndarray, np.ndarray, list[int], str]:
         """Candidate footholds from ``stance`` ranked as :func:`candidate_footholds` does, with
         those from which a chain of ``depth`` more admissible footholds exists first, and among
         them those that keep such a chain when the foot lands further off (``_LANDING_SLACK``; on
         stairs the admissible footholds form narrow windows; a foothold on the edge of its
         window leaves no next step once the actual touchdown misses it by a millimetre).
 
-        With ``need``, candidates are ranked only until the first ``need`` footholds the search
-        tries are settled (the foothold matching ``warm_x`` [m], then candidates spaced by
-        ``candidate_spacing`` in list order, as :meth:`_step_options` picks them); the rest
-        follow unranked, in the order of :func:`candidate_footholds`."""
+        Returns ``(x, y, picks, reason)``: ``picks`` are the indices of the footholds the search
+        tries, in order: the first one within the candidate resolution of ``warm_x`` [m], then
+        candidates at least ``candidate_spacing`` from those picked, in list order, up to
+        ``need``. Candidates are ranked only until the picks are settled; the rest follow
+        unranked, in the order of :func:`candidate_footholds`."""
         cfg, l = self.config, self.params.l  # noqa: E741
         cx, cy, why = candidate_footholds(
             tmap, stance, cfg.rules(), l, self._theta_target(theta_plus), self._gait.step.theta_plus
         )
         depth = min(int(depth), _CHAIN_DEPTH)
-        if cx.size == 0 or depth <= 0:
-            return cx, cy, why
         # without a face or kink within reach every candidate continues alike (smooth ground)
         reach = stance[0] + (depth + 1) * cfg.step_max + max(_LANDING_SLACK) + 2.0 * l
         f = tmap.features
-        if not np.any((f > stance[0] - cfg.step_max) & (f < reach)):
-            return cx, cy, why
-        rank = np.full(cx.size, -1)  # -1: not ranked
-        picks: list[float] = []
-        if need is not None and warm_x is not None:
-            res = cfg.rules().resolution
-            near = np.nonzero(np.abs(cx - warm_x) < res)[0]
-            for k in near:
-                rank[k] = self._landing_rank(tmap, float(cx[k]), depth)
-            if near.size:  # the first match in the ranked list
-                picks.append(float(cx[min(near, key=lambda k: (rank[k], k))]))
-        for k in range(cx.size):
+        ranked = depth > 0 and np.any((f > stance[0] - cfg.step_max) & (f < reach))
+        rank = np.full(cx.size, -1 if ranked else 0)  # -1: not ranked (yet)
+        near = np.zeros(0, dtype=int)
+        if warm_x is not None:
+            near = np.nonzero(np.abs(cx - warm_x) < cfg.rules().resolution)[0]
+        for k in near:
             if rank[k] < 0:
                 rank[k] = self._landing_rank(tmap, float(cx[k]), depth)
-            if need is None or rank[k] != 0:
-                continue
-            if all(abs(cx[k] - p) >= cfg.candidate_spacing for p in picks):
-                picks.append(float(cx[k]))
-                if len(picks) >= need:  # the rest cannot come before these
-                    break
+        picks: list[int] = []
+
+        def offer(k: int) -> bool:
+            """Pick candidate ``k`` if it is spaced from the picks; whether the picks are done."""
+            if len(picks) < need and all(
+                abs(cx[k] - cx[p]) >= cfg.candidate_spacing for p in picks
+            ):
+                picks.append(k)
+            return len(picks) >= need
+
+        if near.size:  # the first match in the ranked list
+            offer(int(min(near, key=lambda k: (rank[k], k))))
+        for k in range(cx.size):  # the best rank first: rank-0 candidates in list order
+            if rank[k] < 0:
+                rank[k] = self._landing_rank(tmap, float(cx[k]), depth)
+            if rank[k] == 0 and offer(k):
+                break
         done = rank >= 0
         order = np.r_[
             np.nonzero(done)[0][np.argsort(rank[done], kind="stable")], np.nonzero(~done)[0]
-        ]
-        return cx[order], cy[order], why
+        ].astype(int)
+        for k in order:  # the picks not settled by the rank-0 candidates
+            if offer(int(k)):
+                break
+        position = np.empty(cx.size, dtype=int)
+        position[order] = np.arange(cx.size)
+        return cx[order], cy[order], [int(position[k]) for k in picks], why
 
     def _landing_rank(self, tmap: TerrainMap, x: float, depth: int) -> int:
         """0 if a chain of ``depth`` footholds continues from ``x`` [m] however far the foot
@@ -1331,7 +1327,7 @@ class GaitPlanner:
         """The step after a step ending on ``fh`` (its start speed left open), or None."""
         cfg, l = self.config, self.params.l  # noqa: E741
         th_p2 = q2m - q1m
-        cx, cy, _ = self._candidates(tmap, fh, th_p2, 1, None, 1)
+        cx, cy, _, _ = self._candidates(tmap, fh, th_p2, 1, None, 1)
         if cx.size == 0:
             return None
         fh2 = (float(cx[0]), float(cy[0]))

@@ -142,6 +142,27 @@ def test_impact_invariance_holds_to_numerical_precision(plans, robot, terrain):
     assert q0[0] - plan.phi(0, q0[1]) == pytest.approx(0.0, abs=1e-14)
 
 
+def test_classic_gait_keeps_a_speed_reserve_for_rises(planners):
+    """The figures quoted for the classic walker (README, configs/planner/classic.yaml): its
+    gait keeps theta_dot >= 0.4 rad/s at 0.61 m/s with a peak hip torque of 74 of 150 N m; a
+    1 cm rise costs 40 % of its kinetic energy after touchdown; with a 40 N m hip no gait keeps
+    that reserve; 2 cm rises cannot be planned."""
+    pl = planners["classic"]
+    g = pl.periodic_gait()
+    th = np.linspace(g.step.theta_plus, g.step.theta_minus, 401)
+    assert g.step.thetadot(th).min() > 0.4 - 1e-3
+    assert g.speed == pytest.approx(0.61, abs=0.005)
+    peak = np.abs(g.step.input(th)).max()
+    assert peak == pytest.approx(74.0, abs=1.0) and peak < 0.8 * pl.params.u_max
+    ke = model.kinetic_energy(pl.P, g.q[0], g.qd[0], g.qd[1])
+    rise = pl.params.total_mass * pl.params.g * 0.01
+    assert rise / ke == pytest.approx(0.40, abs=0.02)
+    with pytest.raises(PlanningError, match="no periodic gait"):
+        GaitPlanner(pl.params.replace(u_max=40.0)).periodic_gait()
+    with pytest.raises(PlanningError):
+        pl.plan(Terrain.staircase(1.0, 3, 1.0, 0.02), (g.q, g.qd), (0.0, 0.0), horizon=7)
+
+
 def test_speed_is_regulated_after_stairs_down(planners):
     """The paper robot speeds up going down the stairs and slows back towards the gait."""
     pl = planners["paper"]
