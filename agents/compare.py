@@ -20,8 +20,9 @@ from typing import Any
 
 from agents.config import TEST_SEED, AgentConfig, ConfigError, load_config
 from agents.evaluate import Evaluation, evaluate, print_table, write_csv
+from configs import CONFIG_DIR as _CONFIGS
 
-CONFIG_DIR = Path(__file__).resolve().parent.parent / "configs" / "agents"
+CONFIG_DIR = _CONFIGS / "agents"
 
 
 @dataclass(frozen=True)

@@ -14,9 +14,9 @@ from typing import Any
 import numpy as np
 import yaml
 
-from .config_util import dataclass_from_mapping
+from configs import CONFIG_DIR
 
-CONFIG_DIR = Path(__file__).resolve().parent.parent / "configs"
+from .config_util import dataclass_from_mapping
 
 # Layout of the flat parameter vector consumed by the compiled model kernels (envs.model).
 P1, P2, P3, P4, P5, P6, P7, P8 = range(8)
