@@ -8,7 +8,7 @@ from controllers.controller import ControllerConfig
 from controllers.planner import PlannerConfig
 from envs.compass_gait_env import EnvSettings
 from envs.config_util import dataclass_from_mapping
-from envs.params import RobotParams
+from envs.physics import RobotParams
 from envs.sensors import SensorConfig
 
 

@@ -1,10 +1,14 @@
-"""Model equations: impact map (closed form vs. momentum derivation), momenta, energy."""
+"""Model equations: impact map (closed form vs. momentum derivation), momenta, energy, the
+swing-phase RK4 step and the contact conditions."""
+
+import math
 
 import numpy as np
 import pytest
+from scipy.integrate import solve_ivp
 
-from envs import model
-from envs.params import RobotParams
+from envs.physics import model
+from envs.physics.params import RobotParams
 
 
 def _states(n=40, seed=0):
@@ -88,3 +92,69 @@ def test_model_functions_work_entrywise_on_arrays():
     a = np.array(model.impact_momentum(P, q1, q2, w1, w2))
     for k in range(5):
         assert np.allclose(a[:, k], model.impact_momentum(P, q1[k], q2[k], w1[k], w2[k]))
+
+
+def test_swing_rk4_step_is_fourth_order_and_its_work_matches_the_hip_rotation():
+    P = RobotParams.from_preset("paper").vector()
+    x0, u = (0.4, -0.1, -0.8, 1.1), 3.0
+
+    def rhs(t, y):
+        a1, a2 = model.accelerations(P, y[0], y[1], y[2], y[3], u)
+        return [y[2], y[3], a1, a2]
+
+    errors = []
+    for h in (0.02, 0.01):
+        a1, a2 = model.accelerations(P, *x0, u)
+        q1, q2, w1, w2, net, pos, ab = model.swing_rk4(P, *x0, u, h, a1, a2)
+        ref = solve_ivp(rhs, (0, h), x0, method="DOP853", rtol=1e-13, atol=1e-13).y[:, -1]
+        errors.append(np.max(np.abs(np.array([q1, q2, w1, w2]) - ref)))
+        tau = model.input_gain(P) * u
+        assert math.isclose(net, tau * (q1 - x0[0]), rel_tol=1e-12)
+        assert pos >= max(net, 0.0) - 1e-15 and ab >= abs(net) - 1e-15 and ab >= pos
+    # local error O(h^5): halving the step divides it by about 32
+    assert errors[0] < 1e-6 and 16.0 < errors[0] / errors[1] < 64.0
+
+
+@pytest.mark.parametrize("slope", [0.0, -0.0525, 0.3])
+def test_ground_normal_is_the_upward_unit_normal(slope):
+    nx, ny = model.ground_normal(slope)
+    assert math.isclose(math.hypot(nx, ny), 1.0, rel_tol=1e-15)
+    assert ny > 0.0 and abs(nx + slope * ny) < 1e-15  # orthogonal to the tangent (1, slope)
+    # a force along the normal has no tangential part; the tangent points forwards
+    assert model.normal_tangential(2.0 * nx, 2.0 * ny, nx, ny) == pytest.approx((2.0, 0.0))
+    assert model.normal_tangential(ny, -nx, nx, ny) == pytest.approx((0.0, 1.0))
+    assert model.outside_friction_cone(1.0, 0.6, 0.5)
+    assert not model.outside_friction_cone(1.0, -0.4, 0.5)
+
+
+def test_stance_reaction_resolves_the_ground_reaction_along_the_ground():
+    P = RobotParams.from_preset("paper").vector()
+    x = (0.3, -0.1, 0.7, 1.1)
+    a1, a2 = model.accelerations(P, *x, 0.5)
+    fx, fy = model.ground_reaction(P, *x, a1, a2)
+    assert model.stance_reaction(P, *x, a1, a2, 0.0, 1.0) == (fy, fx)
+    nx, ny = model.ground_normal(0.1)
+    fn, ft = model.stance_reaction(P, *x, a1, a2, nx, ny)
+    assert np.allclose([fn * nx + ft * ny, fn * ny - ft * nx], [fx, fy], rtol=0, atol=1e-12)
+
+
+def test_heel_strike_on_flat_ground_is_admissible_and_a_backward_throw_is_not():
+    P = RobotParams.from_preset("classic").vector()
+    mass = 2 * 5.0 + 10.0  # 2 m + mH of the classic walker [kg]
+    q1, q2, w1, w2 = 0.4, 0.2, 0.4, 1.2  # flat-ground heel strike, walking forwards
+    post = model.impact(P, q1, q2, w1, w2)
+    ix, iy = model.impact_impulse(P, q1, q2, w1, w2, *post)
+    vm = np.array(model.centre_of_mass_velocity(P, q1, q2, w1, w2))
+    vp = np.array(model.centre_of_mass_velocity(P, *post))
+    assert np.allclose((ix, iy), mass * (vp - vm), rtol=1e-14, atol=0)
+    assert iy > 0.0  # the ground pushes up
+    assert model.trailing_foot_normal_velocity(P, *post, 0.0, 1.0) > 0.0
+    assert model.impact_admissible(P, q1, q2, w1, w2, *post, 0.0, 1.0, 0.0, 1.0, 1.0)
+    # the same impact outside a nearly frictionless cone
+    assert abs(ix) > 1e-3 * iy
+    assert not model.impact_admissible(P, q1, q2, w1, w2, *post, 0.0, 1.0, 0.0, 1.0, 1e-3 * 0.5)
+    # swing leg thrown backwards onto the ground: the trailing foot would go into the ground
+    pre = (0.21, 0.1, -4.0, 0.0)
+    post = model.impact(P, *pre)
+    assert model.trailing_foot_normal_velocity(P, *post, 0.0, 1.0) <= 0.0
+    assert not model.impact_admissible(P, *pre, *post, 0.0, 1.0, 0.0, 1.0, 1.0)

@@ -3,7 +3,7 @@ import math
 import numpy as np
 import pytest
 
-from envs.params import RobotParams, available_presets
+from envs.physics.params import RobotParams, available_presets
 
 
 def test_presets_load_with_units_from_yaml():

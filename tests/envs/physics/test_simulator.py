@@ -1,4 +1,5 @@
-"""Hybrid simulator: invariants, the classic passive limit cycle, events, failures, batching."""
+"""Hybrid simulator: invariants, convergence to the classic passive cycle, events, failures,
+batching, the public state views."""
 
 import math
 
@@ -6,8 +7,15 @@ import numpy as np
 import pytest
 from scipy.integrate import solve_ivp
 
-from envs import FAILURES, RobotParams, SimConfig, Simulator, Terrain, model, simulate
-from envs.simulator import passive_limit_cycle, slope_step_map
+from envs.physics import (
+    FAILURES,
+    RobotParams,
+    SimConfig,
+    Simulator,
+    Terrain,
+    model,
+    simulate,
+)
 
 CLASSIC = RobotParams.from_preset("classic")
 PAPER = RobotParams.from_preset("paper")
@@ -66,21 +74,6 @@ def test_motor_work_balances_the_energy_change_and_is_split_into_parts():
 def _post_impact_samples(res):
     """Indices of the post-impact samples (the second of two samples at the same time)."""
     return np.nonzero(np.diff(res.t) == 0)[0] + 1
-
-
-def test_classic_passive_limit_cycle_matches_the_reference():
-    cyc = passive_limit_cycle(CLASSIC, SLOPE, (Q2P, QD0[0], QD0[1]))
-    z = cyc.state[[1, 2, 3]]
-    assert np.max(np.abs(slope_step_map(CLASSIC, SLOPE, z, SimConfig.accurate())[0] - z)) < 1e-10
-    q1, q2, q1d, q2d = cyc.state
-    assert round(q2, 6) == Q2P
-    assert round(q2 - q1, 6) == SWING
-    assert round(q2d, 6) == Q2DP
-    assert round(q2d - q1d, 6) == SWINGD
-    assert round(cyc.period, 6) == 0.734461
-    assert round(cyc.step_length, 6) == 0.535919
-    moduli = np.sort(np.abs(cyc.eigenvalues))[::-1]
-    assert np.array_equal(np.round(moduli, 3), [0.580, 0.580, 0.131])
 
 
 def test_perturbed_start_converges_to_the_limit_cycle():
@@ -201,9 +194,9 @@ def test_failed_walkers_stay_frozen_until_reset():
     sim.reset(np.array([Q0, (-0.4, -0.2)]), np.array([QD0, (0.0, 4.0)]))
     ev = sim.step(0.0)
     assert sim.failure(1) == "liftoff" and ev.new_failure.tolist() == [False, True]
-    frozen = sim._x[1].copy()
+    frozen = sim.states[1].copy()
     ev = sim.step(0.0)
-    assert np.array_equal(sim._x[1], frozen) and not ev.new_failure.any()
+    assert np.array_equal(sim.states[1], frozen) and not ev.new_failure.any()
     assert sim.status[1] == FAILURES.index("liftoff")
     sim.reset(Q0, QD0, index=1)
     assert sim.failure(1) is None and sim.t[1] == 0.0
@@ -232,10 +225,10 @@ def test_bad_inputs_raise_value_errors(kwargs, match):
 def test_step_rejects_non_finite_torque_without_advancing():
     sim = Simulator(CLASSIC, "flat", 3)
     sim.reset(Q0, QD0)
-    before = sim._x.copy()
+    before = sim.states.copy()
     with pytest.raises(ValueError, match=r"torque\[1\]"):
         sim.step(np.array([0.0, math.nan, 0.0]))
-    assert np.array_equal(sim._x, before)
+    assert np.array_equal(sim.states, before)
     with pytest.raises(ValueError, match="SimConfig.mu"):
         SimConfig(mu=-1.0)
     with pytest.raises(ValueError, match="reset"):
@@ -265,12 +258,36 @@ def test_batch_equals_single_walkers_bit_for_bit():
         impacts += ev.n_impacts
         for i, s in enumerate(singles):
             e1 = s.step(torques[k, i])
-            assert np.array_equal(s._x[0], batch._x[i])
-            assert np.array_equal(s._f[0], batch._f[i])
+            assert np.array_equal(s.states[0], batch.states[i])
+            assert np.array_equal(s.flags[0], batch.flags[i])
             assert np.array_equal(e1.work[0], ev.work[i])
             m = e1.n_impacts[0]
             assert np.array_equal(e1.foothold[0, :m], ev.foothold[i, :m])
     assert np.all(impacts >= 1) and not batch.status.any()
+
+
+def test_state_and_flag_views_are_read_only_and_follow_the_walkers():
+    sim = Simulator(CLASSIC, Terrain.slope(SLOPE), 2)
+    sim.reset(Q0, QD0)
+    states, flags = sim.states, sim.flags
+    assert states.shape == (2, 7) and flags.shape == (2, 4)
+    with pytest.raises(ValueError):
+        states[0, 0] = 1.0
+    with pytest.raises(ValueError):
+        flags[0, 2] = 1
+    impacts = 0
+    for _ in range(80):
+        ev = sim.step(0.0)
+        impacts += int(ev.n_impacts.sum())
+        assert sim.states is states and sim.flags is flags
+        assert np.array_equal(states[:, 0:2], sim.q) and np.array_equal(states[:, 2:4], sim.qd)
+        assert np.array_equal(states[:, 4:6], sim.stance_foot)
+        assert np.array_equal(states[:, 6], sim.t)
+        assert np.array_equal(flags[:, 0], sim.stance_leg)
+        assert np.array_equal(flags[:, 1], sim.armed)
+        assert np.array_equal(flags[:, 2], sim.status)
+        assert np.array_equal(flags[:, 3], ev.n_impacts)
+    assert impacts >= 2 and not sim.status.any()
 
 
 def test_callable_torque_is_held_over_each_period():
@@ -300,12 +317,3 @@ def test_per_walker_terrain_and_masked_reset():
         sim.reset((0.3, 0.5), (0.0, 0.0), index=0)  # retracted swing foot in the ground
     with pytest.raises(ValueError, match="hip"):
         Simulator(CLASSIC, "flat", 1, config=SimConfig(fall_height=0.9)).reset((0.0, 0.6), (0, 0))
-
-
-def test_paper_robot_walks_passively_with_friction_and_retractable_feet():
-    cyc = passive_limit_cycle(PAPER, SLOPE, (Q2P, QD0[0], QD0[1]))
-    assert np.max(np.abs(cyc.eigenvalues)) < 1.0 and 0.1 < cyc.step_length < 0.3
-    q, qd = cyc.state[:2] + (0.0, 0.0), cyc.state[2:] * 1.02
-    res = simulate(PAPER, Terrain.slope(SLOPE), q, qd, 6.0)
-    assert res.failure is None and len(res.impact_times) >= 9
-    assert abs(np.diff(res.impact_times)[-1] - cyc.period) < 1e-3

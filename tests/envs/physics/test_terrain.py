@@ -5,8 +5,7 @@ import math
 import numpy as np
 import pytest
 
-from envs import Terrain
-from envs.terrain import as_terrain, terrain_height
+from envs.physics.terrain import Terrain, as_terrain, terrain_height
 
 ALL_KINDS = [
     Terrain.flat(0.1),
