@@ -1,6 +1,6 @@
 """roughwalk environments: compass-gait model, terrain, simulator and Gymnasium envs."""
 
-from .compass_gait_env import CompassGaitEnv
+from .env import CompassGaitEnv
 from .params import RobotParams
 from .registration import register_envs
 from .sensors import SensorConfig, SensorLayout, encoders_to_q, q_to_encoders

@@ -16,7 +16,7 @@ from __future__ import annotations
 
 import gymnasium as gym
 
-from .compass_gait_env import load_env_config
+from .settings import load_env_config
 
 NAMESPACE = "roughwalk"
 
@@ -41,7 +41,7 @@ def register_envs() -> list[str]:
         steps = load_env_config(config).get("max_episode_steps")
         gym.register(
             id=full,
-            entry_point="envs.compass_gait_env:CompassGaitEnv",
+            entry_point="envs.env:CompassGaitEnv",
             vector_entry_point="envs.vector_env:CompassGaitVectorEnv",
             max_episode_steps=steps,
             kwargs={"config": config},
