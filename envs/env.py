@@ -233,6 +233,8 @@ class CompassGaitEnv(gym.Env):
     def reset(
         self, *, seed: int | None = None, options: dict[str, Any] | None = None
     ) -> tuple[np.ndarray, dict[str, Any]]:
+        """Start an episode (options ``"state"``, ``"terrain"``, ``"stance_leg"``; see the class
+        docstring); returns the observation and the info."""
         super().reset(seed=seed)
         b = self._batch
         b.reset_walker(0, self.np_random, options)
@@ -243,6 +245,7 @@ class CompassGaitEnv(gym.Env):
         return b.observation(0), b.info(0)
 
     def step(self, action: Any) -> tuple[np.ndarray, float, bool, bool, dict[str, Any]]:
+        """Apply the hip command ``action`` in [-1, 1] for one control period."""
         b = self._batch
         if type(action) is np.ndarray and action.shape == (1,):
             a = float(action[0])
@@ -268,6 +271,7 @@ class CompassGaitEnv(gym.Env):
         )
 
     def render(self) -> np.ndarray | None:
+        """An RGB frame (``"rgb_array"``) or a window update (``"human"``)."""
         if self.render_mode is None:
             gym.logger.warn(
                 "render() called without a render_mode; pass render_mode='rgb_array' or 'human'"
@@ -282,6 +286,7 @@ class CompassGaitEnv(gym.Env):
         return self._renderer.render(**self._batch.render_args(0), planned=self.planned_footholds)
 
     def close(self) -> None:
+        """Close the renderer (its window, if any)."""
         if self._renderer is not None:
             self._renderer.close()
             self._renderer = None

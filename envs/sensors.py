@@ -180,6 +180,7 @@ class SensorLayout:
 
     @classmethod
     def from_config(cls, config: SensorConfig) -> SensorLayout:
+        """The layout of the observations of sensors ``config``."""
         return cls(config.scan_count, tuple(float(v) for v in config.scan_offsets))
 
     @property
@@ -189,10 +190,12 @@ class SensorLayout:
 
     @property
     def contacts(self) -> slice:
+        """Slice of the two contact switches (``[A, B]``)."""
         return slice(CONTACT_A, CONTACT_B + 1)
 
     @property
     def scan(self) -> slice:
+        """Slice of the terrain heights."""
         return slice(SCAN, SCAN + self.scan_count)
 
     def decode(self, obs: np.ndarray, previous_stance: int | None = None) -> dict[str, Any]:

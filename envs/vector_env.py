@@ -182,6 +182,8 @@ class CompassGaitVectorEnv(VectorEnv):
     def step(
         self, actions: Any
     ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, dict[str, Any]]:
+        """Apply ``actions`` (``(num_envs, 1)`` in [-1, 1]) for one control period; finished
+        sub-envs reset as ``autoreset_mode`` says."""
         if not self._was_reset:
             raise gym.error.ResetNeeded("call reset() before step()")
         b = self._batch
@@ -239,6 +241,7 @@ class CompassGaitVectorEnv(VectorEnv):
         return tuple(r.render(**self._batch.render_args(i)) for i, r in enumerate(self._renderers))
 
     def close_extras(self, **kwargs: Any) -> None:
+        """Close the renderers."""
         for r in self._renderers:
             r.close()
         self._renderers = []
