@@ -1,6 +1,6 @@
 """roughwalk environments: compass-gait model, terrain, simulator and Gymnasium envs."""
 
-from .compass_gait_env import CompassGaitEnv
+from .env import CompassGaitEnv
 from .physics import (
     FAILURES,
     RobotParams,

@@ -9,14 +9,15 @@ Ids (namespace ``roughwalk``), each with the native vector env as ``vector_entry
   (keyword ``difficulty`` scales the block heights).
 * ``roughwalk/CompassGaitSlope-v0``: the classic walker on a 0.0525 rad downhill.
 
-The settings (and ``max_episode_steps``) of each id live in ``configs/envs/<name>.yaml``.
+The settings (and ``max_episode_steps``) of each id live in ``configs/envs/<name>.yaml``, merged
+over ``configs/envs/base.yaml`` (:func:`envs.settings.load_env_config`).
 """
 
 from __future__ import annotations
 
 import gymnasium as gym
 
-from .compass_gait_env import load_env_config
+from .settings import load_env_config
 
 NAMESPACE = "roughwalk"
 
@@ -33,17 +34,19 @@ ENV_IDS: dict[str, str] = {
 def register_envs() -> list[str]:
     """Register every roughwalk id that is not registered yet; returns all full ids."""
     ids = []
+    steps: dict[str, int | None] = {}  # each config file is read once
     for name, config in ENV_IDS.items():
         full = f"{NAMESPACE}/{name}"
         ids.append(full)
         if full in gym.registry:
             continue
-        steps = load_env_config(config).get("max_episode_steps")
+        if config not in steps:
+            steps[config] = load_env_config(config).get("max_episode_steps")
         gym.register(
             id=full,
-            entry_point="envs.compass_gait_env:CompassGaitEnv",
+            entry_point="envs.env:CompassGaitEnv",
             vector_entry_point="envs.vector_env:CompassGaitVectorEnv",
-            max_episode_steps=steps,
+            max_episode_steps=steps[config],
             kwargs={"config": config},
         )
     return ids

@@ -55,7 +55,7 @@ from numba import njit
 from .config_util import dataclass_from_mapping
 from .terrain import terrain_height
 
-# indices of the sensor observation
+# indices of the sensor observation (``observation="sensors"``)
 HIP = 0
 LEG_A = 1
 CONTACT_A = 2
@@ -63,7 +63,22 @@ CONTACT_B = 3
 SCAN = 4
 N_FIXED = 4
 
-LEG_NAMES = ("A", "B")
+# indices of the true-state observation (``observation="state"``)
+STATE_Q1 = 0
+STATE_Q2 = 1
+STATE_Q1D = 2
+STATE_Q2D = 3
+STATE_STANCE_B = 4
+STATE_SCAN = 5
+
+#: the :class:`SensorConfig` fields of :meth:`SensorConfig.kernel_vector`, in order
+KERNEL_FIELDS = ("encoder_resolution", "encoder_noise", "scan_noise", "scan_resolution",
+                 "scan_range")  # fmt: skip
+K_ENCODER_RESOLUTION = KERNEL_FIELDS.index("encoder_resolution")
+K_ENCODER_NOISE = KERNEL_FIELDS.index("encoder_noise")
+K_SCAN_NOISE = KERNEL_FIELDS.index("scan_noise")
+K_SCAN_RESOLUTION = KERNEL_FIELDS.index("scan_resolution")
+K_SCAN_RANGE = KERNEL_FIELDS.index("scan_range")
 
 ANGLE_BOUND = math.pi  # encoders read in [-pi, pi]
 VELOCITY_BOUND = 100.0  # state-observation joint rates are clipped to this [rad/s]
@@ -143,16 +158,9 @@ class SensorConfig:
         return self.scan_offset + self.scan_spacing * np.arange(self.scan_count, dtype=np.float64)
 
     def kernel_vector(self) -> np.ndarray:
-        """Flat float64 settings vector for :func:`measure`."""
-        return np.array(
-            [
-                self.encoder_resolution,
-                self.encoder_noise,
-                self.scan_noise,
-                self.scan_resolution,
-                self.scan_range,
-            ]
-        )
+        """Flat float64 settings vector of :func:`measure_walker`: the :data:`KERNEL_FIELDS`
+        (entry ``K_<FIELD>``)."""
+        return np.array([getattr(self, name) for name in KERNEL_FIELDS])
 
 
 @dataclass(frozen=True)
@@ -172,6 +180,7 @@ class SensorLayout:
 
     @classmethod
     def from_config(cls, config: SensorConfig) -> SensorLayout:
+        """The layout of the observations of sensors ``config``."""
         return cls(config.scan_count, tuple(float(v) for v in config.scan_offsets))
 
     @property
@@ -181,10 +190,12 @@ class SensorLayout:
 
     @property
     def contacts(self) -> slice:
+        """Slice of the two contact switches (``[A, B]``)."""
         return slice(CONTACT_A, CONTACT_B + 1)
 
     @property
     def scan(self) -> slice:
+        """Slice of the terrain heights."""
         return slice(SCAN, SCAN + self.scan_count)
 
     def decode(self, obs: np.ndarray, previous_stance: int | None = None) -> dict[str, Any]:
@@ -392,8 +403,9 @@ def measure_walker(i, q1, q2, leg, settings, scan, streams, obs):
         scan: ``(n, N)`` exact terrain heights relative to the stance foot (:func:`scan_walker`).
         obs: ``(n, 4 + N)`` float32 output.
     """
-    enc_res, enc_noise = settings[0], settings[1]
-    scan_noise, scan_res, scan_range = settings[2], settings[3], settings[4]
+    enc_res, enc_noise = settings[K_ENCODER_RESOLUTION], settings[K_ENCODER_NOISE]
+    scan_noise, scan_res = settings[K_SCAN_NOISE], settings[K_SCAN_RESOLUTION]
+    scan_range = settings[K_SCAN_RANGE]
     if leg == 1:
         hip, leg_a = -q1, q2 - q1
     else:
@@ -401,15 +413,15 @@ def measure_walker(i, q1, q2, leg, settings, scan, streams, obs):
     if enc_noise > 0.0:
         hip += enc_noise * _normal(streams, i)
         leg_a += enc_noise * _normal(streams, i)
-    obs[i, 0] = _clip(_quantise(hip, enc_res), math.pi)
-    obs[i, 1] = _clip(_quantise(leg_a, enc_res), math.pi)
-    obs[i, 2] = 1.0 if leg == 0 else 0.0
-    obs[i, 3] = 1.0 if leg == 1 else 0.0
+    obs[i, HIP] = _clip(_quantise(hip, enc_res), math.pi)
+    obs[i, LEG_A] = _clip(_quantise(leg_a, enc_res), math.pi)
+    obs[i, CONTACT_A] = 1.0 if leg == 0 else 0.0
+    obs[i, CONTACT_B] = 1.0 if leg == 1 else 0.0
     for k in range(scan.shape[1]):
         h = scan[i, k]
         if scan_noise > 0.0:
             h += scan_noise * _normal(streams, i)
-        obs[i, 4 + k] = _clip(_quantise(h, scan_res), scan_range)
+        obs[i, SCAN + k] = _clip(_quantise(h, scan_res), scan_range)
 
 
 @njit(cache=True)
@@ -420,21 +432,13 @@ def state_walker(i, q1, q2, q1d, q2d, leg, scan, scan_range, obs):
     flag (1.0 when leg B is the stance leg), then the ``N`` exact terrain heights relative to
     the stance foot at the scan offsets (clipped to +-scan_range).
     """
-    obs[i, 0] = _clip(q1, math.pi)
-    obs[i, 1] = _clip(q2, math.pi)
-    obs[i, 2] = _clip(q1d, VELOCITY_BOUND)
-    obs[i, 3] = _clip(q2d, VELOCITY_BOUND)
-    obs[i, 4] = 1.0 if leg == 1 else 0.0
+    obs[i, STATE_Q1] = _clip(q1, math.pi)
+    obs[i, STATE_Q2] = _clip(q2, math.pi)
+    obs[i, STATE_Q1D] = _clip(q1d, VELOCITY_BOUND)
+    obs[i, STATE_Q2D] = _clip(q2d, VELOCITY_BOUND)
+    obs[i, STATE_STANCE_B] = 1.0 if leg == 1 else 0.0
     for k in range(scan.shape[1]):
-        obs[i, 5 + k] = _clip(scan[i, k], scan_range)
-
-
-STATE_FIXED = 5
-
-
-def state_layout_doc() -> str:
-    """Human-readable layout of the ``observation="state"`` vector."""
-    return "q1, q2 [rad], q1dot, q2dot [rad/s], stance_is_B {0,1}, N terrain heights [m]"
+        obs[i, STATE_SCAN + k] = _clip(scan[i, k], scan_range)
 
 
 def observation_bounds(config: SensorConfig, mode: str) -> tuple[np.ndarray, np.ndarray]:
@@ -451,7 +455,7 @@ def observation_bounds(config: SensorConfig, mode: str) -> tuple[np.ndarray, np.
             dtype=np.float32,
         )
         low = -high
-        low[4] = 0.0
+        low[STATE_STANCE_B] = 0.0
     else:
         raise ValueError(f"observation = {mode!r}; allowed: 'sensors', 'state'")
     return low, high

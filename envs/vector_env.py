@@ -27,7 +27,12 @@ from gymnasium.utils import seeding
 from gymnasium.vector import AutoresetMode, VectorEnv
 from gymnasium.vector.utils import batch_space
 
-from .compass_gait_env import EnvSettings, WalkerBatch, actions_to_torques
+from .batch import WalkerBatch
+from .env import actions_to_torques
+from .rendering import WalkerRenderer
+from .settings import resolve_env_settings
+from .simulator import Simulator
+from .terrain import Terrain
 
 _MODES = {
     "next_step": AutoresetMode.NEXT_STEP,
@@ -83,7 +88,7 @@ class CompassGaitVectorEnv(VectorEnv):
             autoreset_mode = _MODES[autoreset_mode.lower()]
         if not isinstance(autoreset_mode, AutoresetMode):
             raise ValueError(f"autoreset_mode must be a string or AutoresetMode: {autoreset_mode}")
-        settings = EnvSettings.build(config, **kwargs)
+        settings = resolve_env_settings(config, **kwargs)
         if max_episode_steps is None:
             max_episode_steps = settings.max_episode_steps
         if max_episode_steps is not None and (
@@ -123,9 +128,15 @@ class CompassGaitVectorEnv(VectorEnv):
         self._renderers: list[Any] = []
 
     @property
-    def terrains(self) -> list:
+    def terrains(self) -> list[Terrain | None]:
         """The current episode's :class:`envs.Terrain` of every sub-env."""
         return list(self._batch.terrains)
+
+    @property
+    def simulator(self) -> Simulator:
+        """The batched simulator of all sub-envs, for diagnostics and benchmarks; stepping or
+        resetting it directly desynchronises the env."""
+        return self._batch.sim
 
     # ------------------------------------------------------------------ reset
     def reset(
@@ -171,6 +182,8 @@ class CompassGaitVectorEnv(VectorEnv):
     def step(
         self, actions: Any
     ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, dict[str, Any]]:
+        """Apply ``actions`` (``(num_envs, 1)`` in [-1, 1]) for one control period; finished
+        sub-envs reset as ``autoreset_mode`` says."""
         if not self._was_reset:
             raise gym.error.ResetNeeded("call reset() before step()")
         b = self._batch
@@ -221,8 +234,6 @@ class CompassGaitVectorEnv(VectorEnv):
         if self.render_mode is None:
             gym.logger.warn("render() called without render_mode='rgb_array'")
             return None
-        from .rendering import WalkerRenderer
-
         while len(self._renderers) < self.num_envs:
             self._renderers.append(
                 WalkerRenderer(self.robot.l, "rgb_array", fps=min(self.metadata["render_fps"], 60))
@@ -230,6 +241,7 @@ class CompassGaitVectorEnv(VectorEnv):
         return tuple(r.render(**self._batch.render_args(i)) for i, r in enumerate(self._renderers))
 
     def close_extras(self, **kwargs: Any) -> None:
+        """Close the renderers."""
         for r in self._renderers:
             r.close()
         self._renderers = []

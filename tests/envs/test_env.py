@@ -14,8 +14,9 @@ import pytest  # noqa: E402
 
 import envs  # noqa: E402, F401  (registers the ids)
 from envs import Terrain  # noqa: E402
-from envs.compass_gait_env import CompassGaitEnv  # noqa: E402
+from envs.env import CompassGaitEnv  # noqa: E402
 from envs.registration import ENV_IDS, NAMESPACE  # noqa: E402
+from envs.settings import load_env_config  # noqa: E402
 
 IDS = [f"{NAMESPACE}/{name}" for name in ENV_IDS]
 ZERO = np.zeros(1, dtype=np.float32)
@@ -204,6 +205,4 @@ def test_torque_limit_override_and_state_observation_bounds() -> None:
         0.5 / 0.0738 * 1.0, rel=1e-3
     )
     with pytest.raises(ValueError, match="torque_limit"):
-        CompassGaitEnv(
-            {**envs.compass_gait_env.load_env_config("flat"), "torque_limit": 1.0, "u_max": 3.0}
-        )
+        CompassGaitEnv({**load_env_config("flat"), "torque_limit": 1.0, "u_max": 3.0})

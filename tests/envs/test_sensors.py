@@ -7,7 +7,7 @@ import math
 import numpy as np
 import pytest
 
-from envs.compass_gait_env import CompassGaitEnv
+from envs.env import CompassGaitEnv
 from envs.sensors import (
     SensorConfig,
     SensorLayout,
