@@ -109,7 +109,9 @@ class StepSearch:
         self.struggling = False
         self.may_stall = previous_plan is not None
 
-    def run(self, start: tuple[float, float, float, float], stance: tuple[float, float]):
+    def run(
+        self, start: tuple[float, float, float, float], stance: tuple[float, float]
+    ) -> list[StepPlan]:
         """The planned steps from ``start = (theta_plus, a_0, phi'(theta_plus),
         theta_dot_plus)`` [rad, rad, -, rad/s] with the stance foot at ``stance`` [m].
 
