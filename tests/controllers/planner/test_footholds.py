@@ -1,12 +1,18 @@
-"""Foothold selection: the rules, checked one by one against a plain rendering of them."""
+"""Foothold selection: the rules, checked one by one against a plain rendering of them, and the
+chains of footholds that rank a step's candidates."""
 
 import math
 
 import numpy as np
 import pytest
 
-from controllers.footsteps import TerrainMap, candidate_footholds, touchdown_configuration
 from controllers.planner import PlannerConfig
+from controllers.planner.footholds import (
+    FootholdChains,
+    TerrainMap,
+    candidate_footholds,
+    touchdown_configuration,
+)
 from envs.terrain import Terrain
 
 TERRAINS = {
@@ -81,3 +87,53 @@ def test_no_foothold_says_why():
     cx, cy, why = candidate_footholds(wall, (0.0, 0.0), rules, 0.32)
     assert cx.size == 0 and cy.size == 0
     assert "no admissible foothold" in why and "height change" in why
+
+
+def brute_reach(tmap, x, depth, rules, l):  # noqa: E741
+    """Longest chain (at most ``depth``) of admissible footholds from a stance foot at ``x``
+    rounded to 1 mm, by trying every candidate."""
+    if depth <= 0:
+        return 0
+    xr = round(float(x), 3)
+    cx, _, _ = candidate_footholds(tmap, (xr, float(tmap.height(xr))), rules, l)
+    return max((1 + brute_reach(tmap, float(c), depth - 1, rules, l) for c in cx), default=0)
+
+
+@pytest.mark.parametrize("terrain", ["stairs_up", "stairs_down", "blocks"])
+def test_chain_lengths_match_an_exhaustive_search(terrain):
+    cfg = PlannerConfig.for_robot("paper")
+    tmap = TerrainMap(TERRAINS[terrain])
+    chains = FootholdChains(cfg.rules(), 0.32, cfg.candidate_spacing)
+    for x in np.linspace(0.0, 0.9, 10):
+        ref = brute_reach(tmap, x, 2, cfg.rules(), 0.32)
+        assert chains.reach(tmap, x, 2) == ref
+        assert chains.chain(tmap, x, 2) == (ref >= 2)
+    wall = TerrainMap(Terrain.stairs([0.4], [0.3]))
+    assert chains.reach(wall, 0.0, 5) < 5
+    assert "no admissible foothold" in chains.reach_break(wall, 0.0, 5)
+
+
+def test_ranked_candidates_pick_spaced_footholds_that_keep_a_chain():
+    cfg = PlannerConfig.for_robot("paper")
+    rules = cfg.rules()
+    tmap = TerrainMap(TERRAINS["stairs_up"])
+    chains = FootholdChains(rules, 0.32, cfg.candidate_spacing)
+    stance = (0.2, float(tmap.height(0.2)))
+    cx, cy, picks, why = chains.ranked(tmap, stance, 0.2, -0.2, 3, None, 4)
+    ref_x, _, _ = candidate_footholds(tmap, stance, rules, 0.32, 0.2, -0.2)
+    assert why == "" and np.array_equal(np.sort(cx), np.sort(ref_x))
+    assert len(picks) == 4
+    xs = cx[picks]
+    assert np.min(np.abs(np.subtract.outer(xs, xs)) + np.eye(4)) >= cfg.candidate_spacing
+    ranks = [chains.landing_rank(tmap, float(x), 3) for x in xs]
+    assert ranks[0] == min(chains.landing_rank(tmap, float(x), 3) for x in cx)
+    assert ranks == sorted(ranks)
+    # a warm start: the candidate next to it comes first
+    warm = float(cx[picks[-1]])
+    cx2, _, picks2, _ = chains.ranked(tmap, stance, 0.2, -0.2, 3, warm, 4)
+    assert abs(cx2[picks2[0]] - warm) < rules.resolution
+
+
+def test_terrain_key_identifies_the_polyline():
+    a, b = TerrainMap(TERRAINS["blocks"]), TerrainMap(TERRAINS["blocks"])
+    assert a.key == b.key and a.key != TerrainMap(TERRAINS["flat"]).key

@@ -1,0 +1,221 @@
+"""Planner settings (:class:`PlannerConfig`, its foothold rules) and the planner's error.
+
+Every setting is declared once, with its unit, in :class:`PlannerConfig`; the robot presets'
+defaults live in ``configs/planner/<preset>.yaml``.
+"""
+
+from __future__ import annotations
+
+import functools
+import math
+from dataclasses import asdict, dataclass, fields
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import yaml
+
+from envs.config_util import dataclass_from_mapping
+from envs.params import CONFIG_DIR
+
+from .footholds import FootholdRules
+
+__all__ = ["PlannerConfig", "PlanningError"]
+
+
+class PlanningError(RuntimeError):
+    """No feasible plan: ``step`` (index within the horizon) and the violated ``constraint``."""
+
+    def __init__(self, step: int, constraint: str, detail: str = ""):
+        self.step = int(step)
+        self.constraint = str(constraint)
+        self.detail = str(detail)
+        msg = f"planning failed at step {self.step}: {self.constraint}"
+        super().__init__(msg + (f" ({detail})" if detail else ""))
+
+
+@dataclass(frozen=True)
+class PlannerConfig:
+    """Planner settings (SI units; lengths in m unless said "fraction of l").
+
+    Attributes:
+        order: Bezier order ``M`` (>= 4).
+        grid: Chebyshev grid size ``n`` per step (``n + 1`` nodes) for the dynamics.
+        check_points: intervals of the uniform grid on which the swing-foot geometry and
+            ``theta_dot^2`` are checked.
+        horizon: steps planned by default.
+        target_speed: walking speed the plan regulates towards [m/s].
+        step_length: preferred horizontal step length [m]; ``step_min``/``step_max`` bounds.
+        edge_margin: least distance of a foothold from a face or kink [m].
+        drop_margin: extra distance from a step-down riser behind a foothold, per metre of drop
+            (room for the next swing's retracted foot to clear the riser) [m/m].
+        rise_margin: extra distance from a step-up riser ahead of a foothold, per metre of rise
+            (room for the next swing foot to clear the riser) [m/m].
+        q1_min, q1_max: inter-leg angle at touchdown bounds [rad].
+        max_rise, max_drop: largest height gain / loss in one step [m].
+        duration_min, duration_max: step duration bounds [s] (Assumption 1).
+        min_thetadot: least ``theta_dot`` over every step [rad/s].
+        gait_min_thetadot: least ``theta_dot`` of the nominal periodic gait [rad/s] (a reserve of
+            kinetic energy for rises; the larger of the two applies to the gait).
+        torque_fraction: nominal ``|u|`` stays below this fraction of ``u_max``.
+        retract: swing-foot retraction, fraction of ``l`` (same rule as the simulator).
+        arm_distance: the full-length swing foot may touch down once it is this far ahead of the
+            stance foot, fraction of ``l``; from then on it must stay above the ground.
+        clearance: least height of the armed swing foot above the ground away from touchdown
+            [m]; it ramps down to 0 over the last ``clearance_ramp`` fraction of the step.
+        arm_clearance: least height of the full-length swing foot when it gets armed [m]; the
+            requirement rises from it to ``clearance`` over ``clearance_ramp`` of the step.
+        retracted_clearance: least height of the retracted swing foot above the ground [m].
+        face_clearance: least height of the swing foot over the top of a vertical face [m].
+        touchdown_slope: least descent rate of the swing foot at touchdown,
+            ``-d(clearance)/d theta`` [m/rad] (transversal impact).
+        friction: friction coefficient used for the stance foot and the impact impulse.
+        w_speed, w_end, w_shape, w_torque, w_slope: cost weights (speed error, error of the
+            next step's post-impact ``theta_dot`` w.r.t. the periodic gait's, shape deviation
+            from the periodic gait, mean squared input relative to ``u_max`` (periodic gait
+            only), post-impact slope deviation).
+        max_iter: SLSQP iterations per step.
+        lookahead: 1 to optimise each step jointly with the next one (only the first is kept;
+            anticipates drops and rises; slower), 2 to do so only where this step and the next
+            change height by more than ``lookahead_rise`` [m] together, 0 never.
+        candidates: footholds tried per step before giving up.
+        candidate_spacing: least spacing between the footholds tried [m].
+    """
+
+    order: int = 4
+    grid: int = 32
+    check_points: int = 96
+    horizon: int = 5
+    target_speed: float = 0.3
+    step_length: float = 0.15
+    step_min: float = 0.08
+    step_max: float = 0.24
+    edge_margin: float = 0.02
+    drop_margin: float = 4.0
+    rise_margin: float = 4.0
+    q1_min: float = 0.2
+    q1_max: float = 1.0
+    max_rise: float = 0.05
+    max_drop: float = 0.08
+    duration_min: float = 0.2
+    duration_max: float = 1.5
+    min_thetadot: float = 0.2
+    gait_min_thetadot: float = 0.0
+    torque_fraction: float = 0.8
+    retract: float = 0.05
+    arm_distance: float = 0.1
+    clearance: float = 0.004
+    clearance_ramp: float = 0.3
+    arm_clearance: float = 0.001
+    retracted_clearance: float = 0.002
+    face_clearance: float = 0.003
+    touchdown_slope: float = 0.02
+    friction: float = 0.8
+    w_speed: float = 1.0
+    w_end: float = 0.3
+    w_shape: float = 0.01
+    w_torque: float = 0.2
+    w_slope: float = 0.05
+    max_iter: int = 60
+    lookahead: int = 2
+    lookahead_rise: float = 0.002
+    candidates: int = 4
+    candidate_spacing: float = 0.01
+
+    def __post_init__(self) -> None:
+        for f in fields(self):
+            v = getattr(self, f.name)
+            if isinstance(v, bool) or not isinstance(v, (int, float, np.integer, np.floating)):
+                raise ValueError(f"PlannerConfig.{f.name} must be a number, got {v!r}")
+            if not math.isfinite(float(v)):
+                raise ValueError(f"PlannerConfig.{f.name} must be finite, got {v!r}")
+        ints = {
+            "order": 4,
+            "grid": 8,
+            "check_points": 8,
+            "horizon": 1,
+            "max_iter": 1,
+            "candidates": 1,
+            "lookahead": 0,
+        }
+        for name, lo in ints.items():
+            v = getattr(self, name)
+            if int(v) != v or v < lo:
+                raise ValueError(f"PlannerConfig.{name} = {v!r}; allowed: integer >= {lo}")
+            object.__setattr__(self, name, int(v))
+        pos = (
+            "target_speed step_length step_min step_max duration_min duration_max min_thetadot "
+            "torque_fraction friction clearance_ramp candidate_spacing"
+        ).split()
+        for name in pos:
+            if not getattr(self, name) > 0:
+                raise ValueError(f"PlannerConfig.{name} = {getattr(self, name)!r}; allowed: > 0")
+        nonneg = (
+            "edge_margin drop_margin rise_margin max_rise max_drop retract arm_distance clearance "
+            "lookahead_rise arm_clearance retracted_clearance face_clearance touchdown_slope "
+            "gait_min_thetadot w_speed w_end w_shape w_torque w_slope"
+        ).split()
+        for name in nonneg:
+            if not getattr(self, name) >= 0:
+                raise ValueError(f"PlannerConfig.{name} = {getattr(self, name)!r}; allowed: >= 0")
+        if not self.duration_min < self.duration_max:
+            raise ValueError("PlannerConfig: need duration_min < duration_max")
+        if not self.torque_fraction <= 1:
+            raise ValueError(
+                f"PlannerConfig.torque_fraction = {self.torque_fraction}; allowed: <= 1"
+            )
+        if not self.retract < 0.5:
+            raise ValueError(f"PlannerConfig.retract = {self.retract}; allowed: [0, 0.5)")
+        if self.lookahead > 2:
+            raise ValueError(f"PlannerConfig.lookahead = {self.lookahead}; allowed: 0, 1 or 2")
+        self.rules()  # validates the foothold fields
+
+    def rules(self) -> FootholdRules:
+        """The foothold rules of this configuration."""
+        return _rules(self)
+
+    def _make_rules(self) -> FootholdRules:
+        return FootholdRules(
+            step_length=self.step_length,
+            step_min=self.step_min,
+            step_max=self.step_max,
+            edge_margin=self.edge_margin,
+            drop_margin=self.drop_margin,
+            rise_margin=self.rise_margin,
+            q1_min=self.q1_min,
+            q1_max=self.q1_max,
+            max_rise=self.max_rise,
+            max_drop=self.max_drop,
+        )
+
+    def to_dict(self) -> dict[str, Any]:
+        """The settings as a plain dict (the form :meth:`from_dict` reads)."""
+        return asdict(self)
+
+    @classmethod
+    def from_dict(cls, d: dict[str, Any]) -> PlannerConfig:
+        """Build from a dict; unknown keys raise ``ValueError``."""
+        return dataclass_from_mapping(cls, d, "planner")
+
+    @classmethod
+    def for_robot(cls, name: str, **changes: Any) -> PlannerConfig:
+        """Defaults for a robot preset from ``configs/planner/NAME.yaml`` (built-in defaults if
+        there is no such file), with ``changes`` applied."""
+        path = CONFIG_DIR / "planner" / f"{name}.yaml"
+        d: dict[str, Any] = {}
+        if path.exists():
+            with open(path) as fh:
+                d = yaml.safe_load(fh) or {}
+        d.update(changes)
+        return cls.from_dict(d)
+
+    @classmethod
+    def from_yaml(cls, path: str | Path) -> PlannerConfig:
+        """Build from a YAML file of settings (unknown keys raise ``ValueError``)."""
+        with open(path) as fh:
+            return cls.from_dict(yaml.safe_load(fh) or {})
+
+
+@functools.lru_cache(maxsize=64)
+def _rules(config: PlannerConfig) -> FootholdRules:
+    return config._make_rules()

@@ -1,0 +1,455 @@
+"""Footholds: the terrain as the planner sees it, the foothold rules, the candidate footholds of
+one step, and the search for chains of admissible footholds over the horizon.
+
+The map is either the true :class:`envs.terrain.Terrain` or heights sampled by a terrain scanner
+(:meth:`TerrainMap.from_scan`). Footholds keep a margin from vertical faces (stair edges, block
+borders) and kinks, give step lengths within bounds, and lie within the reach of the legs
+(inter-leg angle at touchdown within bounds). A step's candidates are ranked so that those from
+which a chain of admissible footholds goes on for the rest of the horizon (up to three steps)
+come first, also when the actual touchdown lands a few millimetres off (on stairs the footholds
+form narrow windows; one on the border of its window leaves no next step after a small miss).
+"""
+
+from __future__ import annotations
+
+import functools
+import math
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+import numpy as np
+from numba import njit
+
+from envs.terrain import Terrain, as_terrain, terrain_height
+
+__all__ = [
+    "FootholdChains",
+    "FootholdRules",
+    "TerrainMap",
+    "candidate_footholds",
+    "touchdown_configuration",
+]
+
+_CHAIN_DEPTH = 3  # footholds looked ahead when ranking candidates
+_CHAIN_STRIDE = 4  # candidates tried first when looking for a chain (then all of them)
+_LANDING_SLACK = (0.008, 0.004)  # touchdown errors a foothold chain should tolerate [m]
+_MEMO_LIMIT = 65536  # entries of a chain memo before it is cleared
+
+
+class TerrainMap:
+    """Terrain as the planner sees it: vectorised heights and the features to keep away from.
+
+    Args:
+        terrain: a :class:`Terrain` (or a spec dict / kind name).
+    """
+
+    def __init__(self, terrain: Terrain | dict | str):
+        self.terrain = as_terrain(terrain)
+        self.xs, self.ys = self.terrain.arrays()
+        self.features = self.terrain.edges()
+        self.faces = self.terrain.vertical_faces()
+        self._face_arr = np.array(self.faces, dtype=np.float64).reshape(-1, 3)
+        self._face_x = np.ascontiguousarray(self._face_arr[:, 0])
+
+    @classmethod
+    def from_scan(
+        cls, xs: Sequence[float], heights: Sequence[float], jump: float = 1e-3
+    ) -> TerrainMap:
+        """Map from scanned heights ``heights[k]`` [m] at increasing positions ``xs[k]`` [m].
+
+        Between samples whose heights differ by more than ``jump`` [m] a vertical face is placed
+        half-way; elsewhere the ground is linear between samples.
+        """
+        x = np.asarray(xs, dtype=np.float64)
+        h = np.asarray(heights, dtype=np.float64)
+        if x.ndim != 1 or x.shape != h.shape or x.size < 2:
+            raise ValueError("terrain scan: xs and heights must be 1-D of equal length >= 2")
+        if not (np.all(np.isfinite(x)) and np.all(np.isfinite(h))):
+            raise ValueError("terrain scan: xs and heights must be finite (no NaN)")
+        if np.any(np.diff(x) <= 0):
+            raise ValueError("terrain scan: xs must be strictly increasing")
+        px, py = [x[0]], [h[0]]
+        for k in range(1, x.size):
+            if abs(h[k] - h[k - 1]) > jump:
+                xm = 0.5 * (x[k - 1] + x[k])
+                px += [xm, xm]
+                py += [h[k - 1], h[k]]
+            px.append(x[k])
+            py.append(h[k])
+        return cls(Terrain.from_points(px, py))
+
+    @classmethod
+    def coerce(cls, terrain: TerrainMap | Terrain | dict | str | tuple) -> TerrainMap:
+        """A :class:`TerrainMap` from a map, a terrain, a spec, or a scan ``(xs, heights)``."""
+        if isinstance(terrain, TerrainMap):
+            return terrain
+        if isinstance(terrain, tuple) and len(terrain) == 2:
+            return cls.from_scan(*terrain)
+        return cls(terrain)
+
+    @functools.cached_property
+    def key(self) -> bytes:
+        """The map's polyline as bytes: equal keys, equal terrain (the planner's memo key)."""
+        return self.xs.tobytes() + self.ys.tobytes()
+
+    def height(self, x: np.ndarray | float) -> np.ndarray | float:
+        """Ground height [m] at ``x`` [m] (the upper height on a vertical face)."""
+        return self.terrain.height(x)
+
+    def distance_to_feature(self, x: np.ndarray) -> np.ndarray:
+        """Distance [m] from each ``x`` to the nearest face or kink (``inf`` if none)."""
+        x = np.asarray(x, dtype=np.float64)
+        if self.features.size == 0:
+            return np.full(x.shape, np.inf)
+        i = np.searchsorted(self.features, x)
+        left = self.features[np.clip(i - 1, 0, self.features.size - 1)]
+        right = self.features[np.clip(i, 0, self.features.size - 1)]
+        return np.minimum(np.abs(x - left), np.abs(right - x))
+
+    def faces_between(self, x0: float, x1: float) -> list[tuple[float, float]]:
+        """Vertical faces strictly between ``x0`` and ``x1`` as ``(x, top height)``."""
+        return [(x, max(a, b)) for x, a, b in self.faces_within(x0, x1) if x0 < x < x1]
+
+    def faces_within(self, x0: float, x1: float) -> list[tuple[float, float, float]]:
+        """Vertical faces ``(x, y_before, y_after)`` with ``x0 <= x <= x1`` [m], in order."""
+        i = int(np.searchsorted(self._face_x, x0, side="left"))
+        j = int(np.searchsorted(self._face_x, x1, side="right"))
+        return self.faces[i:j]
+
+
+@dataclass(frozen=True)
+class FootholdRules:
+    """Geometric rules for footholds (lengths in m, angles in rad).
+
+    Attributes:
+        step_length: preferred horizontal step length [m].
+        step_min, step_max: bounds on the horizontal step length [m].
+        edge_margin: least distance of a foothold from a face or kink [m].
+        q1_min, q1_max: bounds on the inter-leg angle at touchdown [rad].
+        max_rise, max_drop: largest height gain / loss of one step [m].
+        resolution: spacing of the candidate footholds [m].
+        drop_margin: extra distance per metre of drop between a foothold and a step-down riser
+            behind it, so that the next swing's retracted foot clears the riser [m/m].
+        rise_margin: extra distance per metre of rise between a foothold and a step-up riser
+            ahead of it, so that the next swing foot clears the riser [m/m].
+    """
+
+    step_length: float
+    step_min: float
+    step_max: float
+    edge_margin: float
+    q1_min: float
+    q1_max: float
+    max_rise: float
+    max_drop: float
+    resolution: float = 0.002
+    drop_margin: float = 4.0
+    rise_margin: float = 4.0
+
+    def __post_init__(self) -> None:
+        for name in ("step_length", "step_min", "step_max", "q1_min", "q1_max", "resolution"):
+            v = getattr(self, name)
+            if not (math.isfinite(v) and v > 0):
+                raise ValueError(f"FootholdRules.{name} = {v!r}; allowed: finite > 0")
+        for name in ("edge_margin", "max_rise", "max_drop", "drop_margin", "rise_margin"):
+            v = getattr(self, name)
+            if not (math.isfinite(v) and v >= 0):
+                raise ValueError(f"FootholdRules.{name} = {v!r}; allowed: finite >= 0")
+        if not self.step_min <= self.step_length <= self.step_max:
+            raise ValueError(
+                f"FootholdRules: need step_min <= step_length <= step_max, got "
+                f"{self.step_min}, {self.step_length}, {self.step_max}"
+            )
+        if not self.q1_min < self.q1_max < math.pi:
+            raise ValueError(
+                f"FootholdRules: need q1_min < q1_max < pi, got {self.q1_min}, {self.q1_max}"
+            )
+
+
+def touchdown_configuration(
+    dx: np.ndarray | float, dh: np.ndarray | float, l: float
+) -> tuple[np.ndarray | float, np.ndarray | float]:
+    """Pre-impact ``(q1, q2)`` [rad] that puts the swing foot at ``(dx, dh)`` [m] from the stance
+    foot with both legs at full length ``l`` [m]: ``l (sin q2 - sin(q2 - q1)) = dx``,
+    ``l (cos q2 - cos(q2 - q1)) = dh``. ``NaN`` where the foothold is out of reach."""
+    dx, dh = np.asarray(dx, dtype=np.float64), np.asarray(dh, dtype=np.float64)
+    chord = np.hypot(dx, dh) / (2.0 * l)
+    with np.errstate(invalid="ignore"):
+        q1 = 2.0 * np.arcsin(np.where(chord <= 1.0, chord, np.nan))
+    q2 = np.arctan2(-dh, dx) + 0.5 * q1
+    if q1.ndim == 0:
+        return float(q1), float(q2)
+    return q1, q2
+
+
+def candidate_footholds(
+    tmap: TerrainMap,
+    stance: tuple[float, float],
+    rules: FootholdRules,
+    l: float,
+    theta_target: float | None = None,
+    sigma_target: float | None = None,
+) -> tuple[np.ndarray, np.ndarray, str]:
+    """Admissible footholds for the next step, best first.
+
+    Args:
+        tmap: terrain map.
+        stance: stance-foot position ``(x, y)`` [m].
+        rules: foothold rules.
+        l: leg length [m].
+        theta_target: preferred stance-leg angle at touchdown [rad]; when given, candidates
+            are ranked by how close their touchdown ``q2`` is to it (this keeps the phase range
+            of every step near the nominal one: longer steps after a step down), else by the
+            distance from the preferred step length.
+        sigma_target: preferred swing-leg angle ``q2 - q1`` at touchdown [rad] (the next
+            step's start phase), added to the ranking with ``theta_target``.
+
+    Returns:
+        ``(x, y, reason)``: candidate foothold coordinates [m], best first (empty if none),
+        and why candidates were rejected when empty.
+    """
+    x0, y0 = float(stance[0]), float(stance[1])
+    n = int(math.floor((rules.step_max - rules.step_min) / rules.resolution)) + 1
+    mode = 0 if theta_target is None else (1 if sigma_target is None else 2)
+    x, y, seen = _foothold_table(
+        x0, y0, n, rules.step_min, rules.resolution, tmap.xs, tmap.ys, tmap.features,
+        tmap._face_arr, rules.edge_margin, rules.drop_margin, rules.rise_margin,
+        rules.max_rise, rules.max_drop, rules.q1_min, rules.q1_max, float(l), rules.step_length,
+        math.nan if theta_target is None else float(theta_target),
+        math.nan if sigma_target is None else float(sigma_target), mode,
+    )  # fmt: skip
+    if x.size:
+        return x, y, ""
+    any_edge, any_height, any_reach, dh_min, dh_max = seen
+    reasons = []
+    if not any_edge:
+        reasons.append(f"no ground {rules.edge_margin} m away from an edge")
+    if not any_height:
+        reasons.append(
+            f"height change outside [-{rules.max_drop}, {rules.max_rise}] m "
+            f"(range seen {dh_min:.3g} .. {dh_max:.3g} m)"
+        )
+    if not any_reach:
+        reasons.append(f"inter-leg angle at touchdown outside [{rules.q1_min}, {rules.q1_max}]")
+    return (
+        np.zeros(0),
+        np.zeros(0),
+        "no admissible foothold within step length "
+        f"[{rules.step_min}, {rules.step_max}] m: " + "; ".join(reasons or ["rules"]),
+    )
+
+
+class FootholdChains:
+    """Chains of admissible footholds ahead of a stance foot (geometric foothold rules only), and
+    the ranking of a step's candidate footholds by the chains they leave open.
+
+    Chain lengths and the footholds from a stance foot are memoised per terrain (by
+    :attr:`TerrainMap.key`) at 1 mm for the life of the object.
+
+    Args:
+        rules: the foothold rules.
+        l: leg length [m].
+        spacing: least spacing between the footholds a step tries [m].
+    """
+
+    def __init__(self, rules: FootholdRules, l: float, spacing: float):  # noqa: E741
+        self.rules = rules
+        self.l = l
+        self.spacing = spacing
+        self.lengths: dict[tuple, int] = {}  # chain lengths, see reach()
+        self.footholds: dict[tuple, tuple[np.ndarray, str]] = {}  # see chain_footholds()
+
+    def ranked(
+        self,
+        tmap: TerrainMap,
+        stance: tuple[float, float],
+        theta_target: float,
+        sigma_target: float,
+        depth: int,
+        warm_x: float | None,
+        need: int,
+    ) -> tuple[np.ndarray, np.ndarray, list[int], str]:
+        """Candidate footholds from ``stance`` [m] ranked as :func:`candidate_footholds` does
+        (with ``theta_target`` and ``sigma_target`` [rad]), with those from which a chain of
+        ``depth`` more admissible footholds exists first, and among them those that keep such a
+        chain when the foot lands further off (``_LANDING_SLACK``; on stairs the admissible
+        footholds form narrow windows; a foothold on the edge of its window leaves no next step
+        once the actual touchdown misses it by a millimetre).
+
+        Returns ``(x, y, picks, reason)``: ``picks`` are the indices of the footholds the search
+        tries, in order: the first one within the candidate resolution of ``warm_x`` [m], then
+        candidates at least ``spacing`` from those picked, in list order, up to ``need``.
+        Candidates are ranked only until the picks are settled; the rest follow unranked, in
+        the order of :func:`candidate_footholds`."""
+        rules, l = self.rules, self.l  # noqa: E741
+        cx, cy, why = candidate_footholds(tmap, stance, rules, l, theta_target, sigma_target)
+        depth = min(int(depth), _CHAIN_DEPTH)
+        # without a face or kink within reach every candidate continues alike (smooth ground)
+        reach = stance[0] + (depth + 1) * rules.step_max + max(_LANDING_SLACK) + 2.0 * l
+        f = tmap.features
+        ranked = depth > 0 and np.any((f > stance[0] - rules.step_max) & (f < reach))
+        rank = np.full(cx.size, -1 if ranked else 0)  # -1: not ranked (yet)
+        near = np.zeros(0, dtype=int)
+        if warm_x is not None:
+            near = np.nonzero(np.abs(cx - warm_x) < rules.resolution)[0]
+        for k in near:
+            if rank[k] < 0:
+                rank[k] = self.landing_rank(tmap, float(cx[k]), depth)
+        picks: list[int] = []
+
+        def offer(k: int) -> bool:
+            """Pick candidate ``k`` if it is spaced from the picks; whether the picks are done."""
+            if len(picks) < need and all(abs(cx[k] - cx[p]) >= self.spacing for p in picks):
+                picks.append(k)
+            return len(picks) >= need
+
+        if near.size:  # the first match in the ranked list
+            offer(int(min(near, key=lambda k: (rank[k], k))))
+        for k in range(cx.size):  # the best rank first: rank-0 candidates in list order
+            if rank[k] < 0:
+                rank[k] = self.landing_rank(tmap, float(cx[k]), depth)
+            if rank[k] == 0 and offer(k):
+                break
+        done = rank >= 0
+        order = np.r_[
+            np.nonzero(done)[0][np.argsort(rank[done], kind="stable")], np.nonzero(~done)[0]
+        ].astype(int)
+        for k in order:  # the picks not settled by the rank-0 candidates
+            if offer(int(k)):
+                break
+        position = np.empty(cx.size, dtype=int)
+        position[order] = np.arange(cx.size)
+        return cx[order], cy[order], [int(position[k]) for k in picks], why
+
+    def landing_rank(self, tmap: TerrainMap, x: float, depth: int) -> int:
+        """0 if a chain of ``depth`` footholds continues from ``x`` [m] however far the foot
+        lands off by up to the largest ``_LANDING_SLACK``, 1 for the next smaller slack, ...,
+        ``len(_LANDING_SLACK)`` with no slack, one more without any chain."""
+        if not self.chain(tmap, x, depth):
+            return len(_LANDING_SLACK) + 1
+        r = 0
+        for s in _LANDING_SLACK:  # largest landing error the chain tolerates, first
+            if self.chain(tmap, x - s, depth) and self.chain(tmap, x + s, depth):
+                break
+            r += 1
+        return r
+
+    def chain(self, tmap: TerrainMap, x: float, depth: int) -> bool:
+        """Whether ``depth`` consecutive admissible footholds exist from a stance foot at ``x``
+        [m]."""
+        return self.reach(tmap, x, depth) >= depth
+
+    def chain_footholds(self, tmap: TerrainMap, x: float) -> tuple[np.ndarray, str]:
+        """Admissible footholds from a stance foot at ``x`` [m] rounded to 1 mm, and why there are
+        none when empty."""
+        xr = round(float(x), 3)
+        key = (tmap.key, xr)
+        hit = self.footholds.get(key)
+        if hit is None:
+            cx, _, why = candidate_footholds(tmap, (xr, float(tmap.height(xr))), self.rules, self.l)
+            if len(self.footholds) > _MEMO_LIMIT:
+                self.footholds.clear()
+            hit = self.footholds[key] = (cx, why)
+        return hit
+
+    def reach(self, tmap: TerrainMap, x: float, depth: int) -> int:
+        """How many consecutive admissible footholds (at most ``depth``) a chain from a stance
+        foot at ``x`` [m] can have."""
+        if depth <= 0:
+            return 0
+        key = (tmap.key, round(float(x), 3), depth)
+        hit = self.lengths.get(key)
+        if hit is not None:
+            return hit
+        cx, _ = self.chain_footholds(tmap, x)
+        best = 0
+        # every _CHAIN_STRIDE-th candidate first: on passable ground one of them continues
+        for c in (*cx[:: max(1, _CHAIN_STRIDE)], *cx):
+            best = max(best, 1 + self.reach(tmap, float(c), depth - 1))
+            if best >= depth:
+                break
+        if len(self.lengths) > _MEMO_LIMIT:
+            self.lengths.clear()
+        self.lengths[key] = best
+        return best
+
+    def reach_break(self, tmap: TerrainMap, x: float, depth: int) -> str:
+        """Why the longest chain of footholds from ``x`` [m] ends (see :meth:`reach`)."""
+        while True:
+            cx, why = self.chain_footholds(tmap, x)
+            if cx.size == 0:
+                return f"from a stance foot at x = {x:.3f} m: {why}"
+            depth -= 1
+            x = float(max(cx, key=lambda c: self.reach(tmap, float(c), depth)))
+
+
+@njit(cache=True, error_model="numpy")
+def _foothold_table(
+    x0, y0, n, step_min, res, tx, ty, features, faces, edge_margin, drop_margin, rise_margin,
+    max_rise, max_drop, q1_min, q1_max, l, step_length, theta_target, sigma_target, mode,
+):  # fmt: skip
+    """The admissible footholds among ``x0 + step_min + res * k`` (``x, y`` best first) and what
+    was seen: whether any candidate is away from edges, also within the height bounds, also
+    within reach, and the range of height changes (see :func:`candidate_footholds`; ``mode`` 0
+    ranks by step length, 1 adds ``theta_target``, 2 also ``sigma_target``)."""
+    x = np.empty(n)
+    y = np.empty(n)
+    dh = np.empty(n)
+    score = np.empty(n)
+    ok_edge = np.empty(n, dtype=np.bool_)
+    ok_h = np.empty(n, dtype=np.bool_)
+    ok_reach = np.empty(n, dtype=np.bool_)
+    nt, nf = tx.size, features.size
+    reach = x0 + step_min + res * (n - 1) + edge_margin + rise_margin * max_rise
+    for k in range(n):
+        xk = x0 + step_min + res * k
+        yk = terrain_height(tx, ty, nt, xk)
+        d = yk - y0
+        x[k], y[k], dh[k] = xk, yk, d
+        # distance to the nearest face or kink
+        near = np.inf
+        if nf > 0:
+            i = np.searchsorted(features, xk)
+            left = features[min(max(i - 1, 0), nf - 1)]
+            right = features[min(max(i, 0), nf - 1)]
+            near = min(abs(xk - left), abs(right - xk))
+        ok = near >= edge_margin
+        for f in range(faces.shape[0]):
+            xf, ya, yb = faces[f, 0], faces[f, 1], faces[f, 2]
+            if xf < x0 or xf > reach:
+                continue
+            if x0 < xf and ya > yb:  # a step down between the stance foot and the candidate
+                ok = ok and (xk <= xf or xk - xf >= edge_margin + drop_margin * (ya - yb))
+            if 0 < yb - ya <= max_rise:  # a step up ahead of the candidate (not a wall)
+                ok = ok and (xk >= xf or xf - xk >= edge_margin + rise_margin * (yb - ya))
+        ok_edge[k] = ok
+        ok_h[k] = d <= max_rise and d >= -max_drop
+        # touchdown configuration (see touchdown_configuration)
+        dx = xk - x0
+        chord = math.hypot(dx, d) / (2.0 * l)
+        q1 = 2.0 * math.asin(chord) if chord <= 1.0 else np.nan
+        q2 = math.atan2(-d, dx) + 0.5 * q1
+        ok_reach[k] = q1 >= q1_min and q1 <= q1_max
+        if mode == 0:
+            score[k] = abs(dx - step_length)
+        else:
+            score[k] = abs(q2 - theta_target) + 0.1 * abs(dx - step_length) / l
+            if mode == 2:
+                score[k] += 2.0 * abs(q2 - q1 - sigma_target)
+    # admissible candidates by score, ties in order of x (a stable insertion sort)
+    order = np.empty(n, dtype=np.int64)
+    m = 0
+    for k in range(n):
+        if ok_edge[k] and ok_h[k] and ok_reach[k]:
+            i = m
+            while i > 0 and score[order[i - 1]] > score[k]:
+                order[i] = order[i - 1]
+                i -= 1
+            order[i] = k
+            m += 1
+    seen = np.zeros(5)
+    seen[0] = 1.0 if np.any(ok_edge) else 0.0
+    seen[1] = 1.0 if np.any(ok_edge & ok_h) else 0.0
+    seen[2] = 1.0 if np.any(ok_edge & ok_reach) else 0.0
+    seen[3], seen[4] = dh.min(), dh.max()
+    return x[order[:m]], y[order[:m]], seen

@@ -1,0 +1,132 @@
+"""The gait planner's entry point: :class:`GaitPlanner` (periodic gait and step-by-step plans)."""
+
+from __future__ import annotations
+
+import math
+import time
+from dataclasses import asdict
+from typing import Any, ClassVar
+
+import numpy as np
+
+from envs.params import RobotParams, as_params
+
+from .config import PlannerConfig, PlanningError
+from .footholds import FootholdChains, TerrainMap
+from .periodic import GaitCache, solve_periodic_gait
+from .plan import PeriodicGait, Plan
+from .search import StepSearch, StepSolutions
+
+__all__ = ["GaitPlanner"]
+
+_SOLUTIONS_LIMIT = 4096  # solved step problems kept while replanning before they are forgotten
+
+
+class GaitPlanner:
+    """Plans footholds and Bezier constraints step by step over the terrain ahead.
+
+    Args:
+        params: robot parameters (or a preset name).
+        config: :class:`PlannerConfig`, a dict of overrides of the robot's defaults, or None for
+            the robot's defaults (``configs/planner/<preset>.yaml``).
+
+    Attributes:
+        params: the robot's :class:`RobotParams`; P: its parameter vector.
+        config: the :class:`PlannerConfig` (fixed after construction).
+        gait_cache: periodic gaits computed by any planner (shared by all of them: a gait
+            depends on its key only).
+    """
+
+    gait_cache: ClassVar[GaitCache] = GaitCache(limit=64)
+
+    def __init__(
+        self, params: RobotParams | str, config: PlannerConfig | dict[str, Any] | None = None
+    ):
+        self.params = as_params(params)
+        if config is None:
+            config = PlannerConfig.for_robot(self.params.name)
+        elif isinstance(config, dict):
+            config = PlannerConfig.for_robot(self.params.name, **config)
+        elif not isinstance(config, PlannerConfig):
+            raise ValueError(f"config must be a PlannerConfig, a dict or None, got {config!r}")
+        self.config = config
+        self.P = self.params.vector()
+        self._flat = TerrainMap("flat")
+        # step problems solved during the current walk, and foothold chains (per terrain)
+        self._solutions = StepSolutions()
+        self._chains = FootholdChains(config.rules(), self.params.l, config.candidate_spacing)
+
+    def periodic_gait(
+        self, step_length: float | None = None, speed: float | None = None
+    ) -> PeriodicGait:
+        """Periodic gait on flat ground with the given step length [m] and a speed [m/s] as close
+        to ``speed`` as the constraints allow (defaults: the configuration's).
+
+        Raises:
+            PlanningError: no feasible periodic gait.
+            ValueError: step length or speed out of range.
+        """
+        cfg = self.config
+        L = cfg.step_length if step_length is None else float(step_length)
+        vt = cfg.target_speed if speed is None else float(speed)
+        if not (math.isfinite(L) and 0 < L < 2 * self.params.l):
+            raise ValueError(f"step_length = {L!r}; allowed: (0, 2 l) = (0, {2 * self.params.l})")
+        if not (math.isfinite(vt) and vt > 0):
+            raise ValueError(f"speed = {vt!r}; allowed: > 0 m/s")
+        key = (tuple(self.P), tuple(sorted(asdict(cfg).items())), L, vt)
+        gait = self.gait_cache.get(key)
+        if gait is None:
+            gait = solve_periodic_gait(self.params, cfg, self._flat, L, vt)
+            self.gait_cache.put(key, gait)
+        return gait
+
+    def plan(
+        self,
+        terrain: Any,
+        state: tuple[np.ndarray, np.ndarray],
+        stance_foot: tuple[float, float],
+        horizon: int | None = None,
+        previous_plan: Plan | None = None,
+    ) -> Plan:
+        """Plan ``horizon`` steps from the post-impact ``state``.
+
+        Args:
+            terrain: a :class:`envs.terrain.Terrain`, a spec, a :class:`TerrainMap`, or a scan
+                ``(xs, heights)`` [m].
+            state: actual post-impact ``(q, qd)`` [rad, rad/s] (``q2d > 0``).
+            stance_foot: stance-foot position ``(x, y)`` [m].
+            horizon: number of steps (default ``config.horizon``).
+            previous_plan: the plan made at the previous footstep (warm start). Step problems
+                this planner already solved since the last call without a previous plan (same
+                terrain, start state, footholds and weights, to 1e-10) are reused after one
+                feasibility check instead of being optimised again; with ``None`` the planner
+                forgets them, so a call without a previous plan depends on its arguments only.
+
+        Raises:
+            PlanningError: no feasible step (names the step and the violated constraint).
+            ValueError: malformed state.
+        """
+        t0 = time.perf_counter()
+        cfg = self.config
+        H = cfg.horizon if horizon is None else int(horizon)
+        if H < 1:
+            raise ValueError(f"horizon = {horizon!r}; allowed: integer >= 1")
+        q = np.asarray(state[0], dtype=float).reshape(-1)
+        qd = np.asarray(state[1], dtype=float).reshape(-1)
+        if q.shape != (2,) or qd.shape != (2,) or not np.all(np.isfinite(np.r_[q, qd])):
+            raise ValueError(f"state must be finite (q, qd) pairs, got {state!r}")
+        if not qd[1] > 0:
+            raise PlanningError(0, "post-impact theta_dot positive", f"q2d = {qd[1]:.4g} rad/s")
+        tmap = TerrainMap.coerce(terrain)
+        # a call without a previous plan starts afresh (its result depends on its inputs only)
+        if previous_plan is None or len(self._solutions) > _SOLUTIONS_LIMIT:
+            self._solutions.clear()
+        gait = self.periodic_gait()
+        search = StepSearch(
+            self.params, cfg, tmap, gait, self._solutions, self._chains, H, previous_plan
+        )
+        start = (float(q[1]), float(q[0]), float(qd[0] / qd[1]), float(qd[1]))
+        stance = (float(stance_foot[0]), float(stance_foot[1]))
+        plan = Plan(search.run(start, stance), self.params, cfg)
+        plan.solve_time = time.perf_counter() - t0
+        return plan

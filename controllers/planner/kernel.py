@@ -1,0 +1,427 @@
+"""Compiled evaluation of one step's constraints and cost, for a batch of Bezier shapes.
+
+The planner's optimiser evaluates a step thousands of times per footstep (SLSQP iterations and
+their finite-difference Jacobians, global searches). This kernel computes, row by row and in one
+compiled loop, what :class:`controllers.planner.problem.StepEvaluator` documents: the reduced
+dynamics along the constraint, ``theta_dot^2`` and the step time, the nominal input and
+stance-foot reaction, the swing-foot geometry against the terrain (retractable-foot rule,
+vertical faces), the touchdown and impact conditions, and the cost. Every model quantity comes
+from :mod:`envs.model` (its functions compile for scalars) and the reduced dynamics from
+:mod:`controllers.reduced`; only the loops live here.
+
+The constraints of a row go to the columns of ``G`` that the constraint-group table
+(:data:`controllers.planner.problem.CONSTRAINT_GROUPS`) lays out; the kernel receives each
+group's first column by name (a ``GroupColumns`` record built from that table). Every entry is
+``>= 0`` when satisfied.
+"""
+
+from __future__ import annotations
+
+import math
+from typing import NamedTuple
+
+import numpy as np
+from numba import njit
+
+from envs import model
+from envs.params import PL
+from envs.terrain import terrain_height
+
+from .. import reduced as rd
+
+__all__ = [
+    "StepGrids",
+    "StepGround",
+    "StepOutputs",
+    "StepScalars",
+    "StepSettings",
+    "evaluate_steps",
+    "pack",
+    "packed_size",
+]
+
+
+class StepSettings(NamedTuple):
+    """Constants of the step problem: robot, bounds and cost weights (SI units)."""
+
+    min_thetadot: float  # least theta_dot over the step [rad/s]
+    alpha_scale: float  # scale of the reduced inertia alpha (M22 at q1 = 0)
+    u_lim: float  # bound on the nominal |u| [input units]
+    u_max: float  # actuator limit [input units]
+    retract: float  # swing-foot retraction [m]
+    arm: float  # arming distance of the swing foot [m]
+    arm_clearance: float  # least height of the full-length foot when armed [m]
+    clearance: float  # least height of the armed swing foot [m]
+    clearance_ramp: float  # fraction of the step over which the clearance ramps
+    retracted_clearance: float  # least height of the retracted foot [m]
+    face_clearance: float  # least height over the top of a vertical face [m]
+    touchdown_slope: float  # least descent rate of the foot at touchdown [m/rad]
+    friction: float  # friction coefficient
+    duration_min: float  # step duration bounds [s]
+    duration_max: float
+    weight: float  # robot weight [N]
+    mass: float  # total mass [kg]
+    w_speed: float  # cost weights
+    w_torque: float
+    w_end: float
+    w_slope: float
+    w_shape: float
+
+
+class StepScalars(NamedTuple):
+    """The scalars of one step problem: its start, stance foot, foothold and cost targets."""
+
+    fmin: float  # least theta_dot^2 [rad^2/s^2]
+    xs: float  # stance foot [m]
+    ys: float
+    slope_stance: float  # ground slope under the stance foot
+    slope_foot: float  # ground slope under the foothold
+    foot_x: float  # foothold abscissa [m]
+    theta_plus: float  # phase at the start [rad]
+    span: float  # phase range theta_minus - theta_plus [rad]
+    wscale: float  # scale of the weights pulling towards the reference gait
+    v_target: float  # walking speed aimed at [m/s]
+    thetadot_minus_ref: float  # reference end-of-step theta_dot [rad/s] (with a reference)
+    slope_ref: float  # reference post-impact slope (with a reference)
+    delta_ref: float  # reference impact gain (with a reference)
+
+
+class StepGrids(NamedTuple):
+    """The grids of a step problem (phase as a fraction of the step's range)."""
+
+    nodes: np.ndarray  # Chebyshev nodes (N,)
+    basis: np.ndarray  # Bernstein basis on the nodes (N, M + 1)
+    dbasis: np.ndarray  # its first derivative
+    ddbasis: np.ndarray  # its second derivative
+    check: np.ndarray  # uniform check grid (K + 1,)
+    check_basis: np.ndarray  # Bernstein basis on the check grid (K + 1, M + 1)
+    integral: np.ndarray  # Chebyshev cumulative-integral matrix (N, N)
+    interp: np.ndarray  # nodes -> check grid interpolation (K + 1, N)
+    clearance: np.ndarray  # clearance required along the check grid [m] (K + 1,)
+
+
+class StepGround(NamedTuple):
+    """The ground of a step problem: terrain polyline and the faces between stance foot and
+    foothold (abscissa, top height [m], whether the full-length foot crosses it)."""
+
+    xs: np.ndarray
+    ys: np.ndarray
+    face_x: np.ndarray
+    face_top: np.ndarray
+    face_full: np.ndarray
+
+
+class StepOutputs(NamedTuple):
+    """What :func:`evaluate_steps` writes, one row per shape."""
+
+    constraints: np.ndarray  # (B, columns) constraint groups, >= 0 when satisfied
+    thetadot_sq: np.ndarray  # (B, N) theta_dot^2 on the nodes [rad^2/s^2]
+    input: np.ndarray  # (B, N) nominal input on the nodes [input units]
+    cost: np.ndarray  # (B,)
+    duration: np.ndarray  # (B,) step duration [s]
+    thetadot_minus: np.ndarray  # (B,) theta_dot at the impact [rad/s]
+    delta: np.ndarray  # (B,) impact gain along the constraints
+    slope_plus: np.ndarray  # (B,) post-impact q1d/q2d
+    speed: np.ndarray  # (B,) walking speed [m/s]
+    arm_theta: np.ndarray  # (B,) phase at which the swing foot is armed [rad] (NaN: never)
+    thetadot_plus: np.ndarray  # (B,) start theta_dot [rad/s]
+    gain: np.ndarray  # (B,) step-to-step gain of theta_dot^2 (periodic gait; else NaN)
+
+    @classmethod
+    def allocate(cls, rows: int, columns: int, nodes: int) -> StepOutputs:
+        """Uninitialised outputs for ``rows`` shapes, ``columns`` constraints, ``nodes`` nodes."""
+        per_row = np.empty((len(cls._fields) - 3, rows))
+        return cls(
+            np.empty((rows, columns)), np.empty((rows, nodes)), np.empty((rows, nodes)), *per_row
+        )
+
+
+_jit = njit(cache=True, error_model="numpy")
+
+
+@_jit
+def _cumint(v, q, half, out):
+    """``out[k] = int_{theta_0}^{theta_k} v`` on the Chebyshev grid (``q``: node matrix)."""
+    n = v.size
+    for k in range(n):
+        s = 0.0
+        for j in range(n):
+            s += q[k, j] * v[j]
+        out[k] = half * s
+
+
+@_jit
+def evaluate_steps(
+    P, a, thd_plus_in, periodic, use_ref, shape_ref, cfg, step, grids, ground, col, out
+):
+    """Evaluate the steps with Bezier coefficients ``a`` (``(B, M + 1)``), one row each.
+
+    ``P``: robot parameter vector. ``thd_plus_in``: start ``theta_dot`` per row (ignored when
+    ``periodic``: the fixed point of the step-to-step map is used). ``use_ref``: the cost pulls
+    towards the reference gait (``step.thetadot_minus_ref``, ``step.slope_ref``,
+    ``shape_ref``: the gait's normalised shape) instead of minimising effort. ``cfg``:
+    :class:`StepSettings`; ``step``: :class:`StepScalars`; ``grids``: :class:`StepGrids`;
+    ``ground``: :class:`StepGround`; ``col``: first column of each constraint group in
+    ``out.constraints``, by group name. Writes ``out`` (:class:`StepOutputs`).
+    """
+    snodes, B0, B1, B2 = grids.nodes, grids.basis, grids.dbasis, grids.ddbasis
+    sg, Bg, qint, interp, clear_req = (
+        grids.check,
+        grids.check_basis,
+        grids.integral,
+        grids.interp,
+        grids.clearance,
+    )
+    tx, ty = ground.xs, ground.ys
+    face_x, face_top, face_full = ground.face_x, ground.face_top, ground.face_full
+    G, F, U = out.constraints, out.thetadot_sq, out.input
+    nb, m1 = a.shape
+    m = m1 - 1
+    nn = B0.shape[0]
+    nk = Bg.shape[0]
+    nt = tx.size
+    nf = face_x.size
+    span = step.span
+    th0 = step.theta_plus
+    half = 0.5 * span
+    xs, ys = step.xs, step.ys
+    l = P[PL]  # noqa: E741
+    min_thd = cfg.min_thetadot
+    thd_ref = max(min_thd, 1e-3)
+    lo = 0.25 * min_thd * min_thd
+    ns = step.slope_stance
+    cn = 1.0 / math.sqrt(1.0 + ns * ns)
+    sn = ns * cn
+    sl = step.slope_foot
+    ic = 1.0 / math.sqrt(1.0 + sl * sl)
+    ih = sl * ic
+    weight = cfg.weight
+    mass = cfg.mass
+    arm = cfg.arm
+    ret = cfg.retract
+    al_min = 0.02 * cfg.alpha_scale  # alpha floor in the integrals (kept away from 0)
+    ph = np.empty(nn)
+    dph = np.empty(nn)
+    ddph = np.empty(nn)
+    th = np.empty(nn)
+    al = np.empty(nn)
+    be = np.empty(nn)
+    ga = np.empty(nn)
+    w = np.empty(nn)
+    kint = np.empty(nn)
+    hint = np.empty(nn)
+    psi = np.empty(nn)
+    thd = np.empty(nn)
+    tcum = np.empty(nn)
+    cfull = np.empty(nk)
+    cret = np.empty(nk)
+    fxf = np.empty(nk)
+    fyf = np.empty(nk)
+    fxr = np.empty(nk)
+    fyr = np.empty(nk)
+    ahead = np.empty(nk)
+    for b in range(nb):
+        # constraint and its phase derivatives on the nodes
+        for k in range(nn):
+            s0 = 0.0
+            s1 = 0.0
+            s2 = 0.0
+            for i in range(m1):
+                s0 += a[b, i] * B0[k, i]
+                s1 += a[b, i] * B1[k, i]
+                s2 += a[b, i] * B2[k, i]
+            ph[k] = s0
+            dph[k] = s1 / span
+            ddph[k] = s2 / (span * span)
+            th[k] = th0 + span * snodes[k]
+        # reduced dynamics and its integral theta_dot^2 = psi theta_dot0^2 + Gam
+        for k in range(nn):
+            a_, b_, g_ = rd.reduced_coefficients(P, ph[k], th[k], dph[k], ddph[k])
+            al[k] = a_
+            be[k] = b_
+            ga[k] = g_
+            w[k] = 2.0 * b_ / max(a_, al_min)
+        _cumint(w, qint, half, kint)
+        for k in range(nn):
+            w[k] = -2.0 * ga[k] / max(al[k], al_min) * math.exp(kint[k])
+        _cumint(w, qint, half, hint)
+        for k in range(nn):
+            psi[k] = math.exp(-kint[k])
+            hint[k] = psi[k] * hint[k]  # Gam
+        gain = math.nan
+        if periodic:
+            d, _ = rd.impact_along_constraint(P, ph[nn - 1], dph[nn - 1])
+            d2 = d * d
+            gain = d2 * psi[nn - 1]
+            td2 = d2 * hint[nn - 1] / (1.0 - gain) if gain < 1.0 else -1.0
+            thp = math.sqrt(max(td2, lo))
+        else:
+            td2 = 0.0
+            thp = thd_plus_in[b]
+        for k in range(nn):
+            f = psi[k] * thp * thp + hint[k]
+            F[b, k] = f
+            thd[k] = math.sqrt(max(f, lo))
+            w[k] = 1.0 / thd[k]
+        _cumint(w, qint, half, tcum)
+        T = tcum[nn - 1]
+        # nominal input and stance-foot reaction along the motion
+        for k in range(nn):
+            f = max(F[b, k], lo)
+            a_safe = max(al[k], al_min)
+            q1dd, q2dd = rd.nominal_accelerations(a_safe, be[k], ga[k], dph[k], ddph[k], f)
+            u = rd.nominal_input(P, ph[k], th[k], dph[k], ddph[k], thd[k])
+            U[b, k] = u
+            rx, ry = model.ground_reaction(P, ph[k], th[k], dph[k] * thd[k], thd[k], q1dd, q2dd)
+            fn = cn * ry - sn * rx
+            ft = cn * rx + sn * ry
+            G[b, col.thetadot_sq + k] = (F[b, k] - step.fmin) / (thd_ref * thd_ref)
+            G[b, col.alpha + k] = al[k] / cfg.alpha_scale - 0.05
+            G[b, col.torque + k] = (cfg.u_lim - abs(u)) / cfg.u_max
+            G[b, col.stance_reaction + k] = fn / weight
+            G[b, col.stance_reaction + nn + k] = (cfg.friction * fn - abs(ft)) / weight
+        for k in range(nk):
+            s = 0.0
+            for j in range(nn):
+                s += interp[k, j] * F[b, j]
+            G[b, col.thetadot_sq + nn + k] = (s - step.fmin) / (thd_ref * thd_ref)
+        # swing foot on the check grid, full length and retracted
+        i_arm = -1
+        for k in range(nk):
+            s0 = 0.0
+            for i in range(m1):
+                s0 += a[b, i] * Bg[k, i]
+            thg = th0 + span * sg[k]
+            x, y = model.swing_foot_position(P, s0, thg, xs, ys, 0.0)
+            fxf[k] = x
+            fyf[k] = y
+            cfull[k] = y - terrain_height(tx, ty, nt, x)
+            x, y = model.swing_foot_position(P, s0, thg, xs, ys, ret)
+            fxr[k] = x
+            fyr[k] = y
+            cret[k] = y - terrain_height(tx, ty, nt, x)
+            ahead[k] = fxf[k] - xs - arm
+            if i_arm < 0 and ahead[k] >= 0.0:
+                i_arm = k
+        s_arm = sg[i_arm] if i_arm >= 0 else 1.0
+        g_arm = -math.inf
+        for k in range(nk):
+            rise = min(max((sg[k] - s_arm) / cfg.clearance_ramp, 0.0), 1.0)
+            req = min(clear_req[k], cfg.arm_clearance + (cfg.clearance - cfg.arm_clearance) * rise)
+            if k < nk - 1:
+                if i_arm >= 0 and k >= i_arm:
+                    G[b, col.clearance + k] = (cfull[k] - req) / l
+                else:
+                    G[b, col.clearance + k] = (cret[k] - cfg.retracted_clearance) / l
+                g_arm = max(g_arm, min(ahead[k] / l, (cfull[k] - req) / l))
+        G[b, col.armed] = g_arm
+        # the simulator arms the foot as soon as it is ahead (and above the ground): between
+        # the grid points around the crossing the full-length foot must already clear the ground
+        s_cross = s_arm
+        G[b, col.armed + 1] = 1.0
+        if i_arm > 0:
+            wk = -ahead[i_arm - 1] / (ahead[i_arm] - ahead[i_arm - 1])
+            s_cross = sg[i_arm - 1] + wk * (sg[i_arm] - sg[i_arm - 1])
+            c_cross = cfull[i_arm - 1] + wk * (cfull[i_arm] - cfull[i_arm - 1])
+            G[b, col.armed + 1] = (c_cross - cfg.arm_clearance) / l
+        # vertical faces crossed: the full-length foot once ahead, else the retracted one
+        G[b, col.faces] = 1.0
+        for j in range(nf):
+            xf = face_x[j]
+            val = -1.0
+            for k in range(nk - 1):
+                if fxf[k] < xf and fxf[k + 1] >= xf:
+                    wk = (xf - fxf[k]) / (fxf[k + 1] - fxf[k])
+                    if face_full[j]:
+                        yy = fyf[k] + wk * (fyf[k + 1] - fyf[k])
+                    else:
+                        yy = fyr[k] + wk * (fyr[k + 1] - fyr[k])
+                    val = (yy - face_top[j] - cfg.face_clearance) / l
+                    break
+            G[b, col.faces + 1 + j] = val
+        # touchdown transversality: clearance decreasing along theta
+        e = nn - 1
+        vx1, vy1 = model.swing_foot_velocity(P, ph[e], th[e], dph[e], 1.0)
+        G[b, col.touchdown] = (-(vy1 - sl * vx1) - cfg.touchdown_slope) / l
+        G[b, col.duration] = (T - cfg.duration_min) / cfg.duration_min
+        G[b, col.duration + 1] = (cfg.duration_max - T) / cfg.duration_min
+        # impact: impulse into the ground within the cone, trailing foot leaves the ground
+        q1m, q2m, w1m, w2m = ph[e], th[e], dph[e] * thd[e], thd[e]
+        q1p, q2p, w1p, w2p = model.impact(P, q1m, q2m, w1m, w2m)
+        delta, slope_plus = rd.impact_along_constraint(P, q1m, dph[e])
+        vxm, vym = model.centre_of_mass_velocity(P, q1m, q2m, w1m, w2m)
+        vxp, vyp = model.centre_of_mass_velocity(P, q1p, q2p, w1p, w2p)
+        ix, iy = mass * (vxp - vxm), mass * (vyp - vym)
+        imp_n = ic * iy - ih * ix
+        imp_t = ic * ix + ih * iy
+        sc = mass * l * thd_ref
+        G[b, col.impact] = imp_n / sc
+        G[b, col.impact + 1] = (cfg.friction * imp_n - abs(imp_t)) / sc
+        tvx, tvy = model.swing_foot_velocity(P, q1p, q2p, w1p, w2p)
+        G[b, col.trailing_foot] = (cn * tvy - sn * tvx) / (l * thd_ref)
+        G[b, col.post_impact_speed] = (delta * thd[e] - min_thd) / thd_ref
+        if periodic:
+            G[b, col.periodic] = 1.0 - gain - 0.02
+            G[b, col.periodic + 1] = td2 / (min_thd * min_thd) - 1.0
+        # cost: speed; with a reference gait also the end speed, post-impact slope and shape
+        v = (step.foot_x - xs) / T
+        vt = step.v_target
+        cost = cfg.w_speed * ((v - vt) / vt) ** 2
+        if not use_ref:
+            su = 0.0
+            for k in range(nn):
+                su += (U[b, k] / cfg.u_max) ** 2
+            cost += cfg.w_torque * su / nn
+        else:
+            ws = step.wscale
+            dr = step.delta_ref * step.thetadot_minus_ref
+            cost += ws * cfg.w_end * ((delta * thd[e] - dr) / dr) ** 2
+            cost += ws * cfg.w_slope * (slope_plus - step.slope_ref) ** 2
+            chord = a[b, m] - a[b, 0]
+            den = max(abs(chord), 1e-6)
+            sh = 0.0
+            for i in range(2, m):
+                rel = (a[b, i] - (a[b, 0] + chord * i / m)) / den
+                sh += (rel - shape_ref[i]) ** 2
+            cost += ws * cfg.w_shape * sh
+        out.cost[b] = cost
+        out.duration[b] = T
+        out.thetadot_minus[b] = thd[e]
+        out.delta[b] = delta
+        out.slope_plus[b] = slope_plus
+        out.speed[b] = v
+        out.arm_theta[b] = th0 + span * s_cross if i_arm >= 0 else math.nan
+        out.thetadot_plus[b] = thp
+        out.gain[b] = gain
+
+
+def packed_size(sizes: list[int], block: int) -> int:
+    """Length of the constraint vector :func:`pack` makes from groups of these sizes."""
+    return sum(-(-k // block) if k > 2 * block else k for k in sizes)
+
+
+@_jit
+def pack(G, offsets, block, out):
+    """SLSQP's constraint vectors from ``G``: groups longer than ``2 block`` reduced to minima
+    over blocks of ``block`` neighbouring grid points (SLSQP's cost grows quickly with the number
+    of constraints); NaN -> violated (``-1e3``), ``+inf`` -> ``1e3``, ``-inf`` -> ``-1e3``."""
+    nb = G.shape[0]
+    ng = offsets.size - 1
+    for b in range(nb):
+        c = 0
+        for i in range(ng):
+            lo, hi = offsets[i], offsets[i + 1]
+            step = block if hi - lo > 2 * block else 1
+            for j in range(lo, hi, step):
+                v = G[b, j]
+                for k in range(j + 1, min(j + step, hi)):
+                    if G[b, k] < v or G[b, k] != G[b, k]:
+                        v = G[b, k]
+                        if v != v:
+                            break
+                if v != v or v == -math.inf:
+                    v = -1e3
+                elif v == math.inf:
+                    v = 1e3
+                out[b, c] = v
+                c += 1

@@ -1,0 +1,547 @@
+"""The step problem: one step's constraints and cost as functions of its free Bezier coefficients,
+and the adaptor that hands a batched step problem to SLSQP.
+
+For every step the Bezier coefficients ``a_0``, ``a_1`` and ``a_M`` follow from the step's start
+and foothold (:class:`FixedStep`); ``a_2 .. a_{M-1}`` are free. :class:`StepEvaluator` evaluates
+the step for a batch of free-coefficient vectors in one compiled call
+(:func:`controllers.planner.kernel.evaluate_steps`): feasibility (``theta_dot^2`` bounded away
+from zero, swing-foot clearance under the retractable-foot rule, transversal touchdown, step
+duration and hip input within bounds, stance foot loaded and not slipping, impact impulse inside
+the friction cone, trailing foot taking off) and a cost that regulates the walking speed
+towards a target and pulls the step towards the periodic gait (:class:`GaitReference`).
+
+The constraints are checked on each step's Chebyshev grid (dynamics: input, reaction) and on a
+uniform grid (geometry, ``theta_dot^2``); between the nodes of the first the nominal input can
+exceed the bound by a few percent. :data:`CONSTRAINT_GROUPS` is the one table of the constraint
+groups: their order, names, sizes and how a violation is reported; the columns the kernel
+writes and the names the planner reports both derive from it.
+
+:class:`BatchProblem` gives SLSQP forward-difference Jacobians whose perturbed points are
+evaluated in one batched call.
+"""
+
+from __future__ import annotations
+
+import math
+from collections import namedtuple
+from collections.abc import Callable
+from dataclasses import dataclass
+from typing import Any, NamedTuple
+
+import numpy as np
+from scipy.optimize import minimize
+
+from envs import model
+from envs.params import RobotParams
+
+from .. import reduced as rd
+from ..bezier import bernstein_basis
+from . import kernel
+from .config import PlannerConfig
+from .footholds import TerrainMap
+from .kernel import StepGrids, StepGround, StepOutputs, StepScalars, StepSettings
+from .plan import PeriodicGait
+
+__all__ = [
+    "CONSTRAINT_GROUPS",
+    "BatchProblem",
+    "ConstraintGroup",
+    "ConstraintGroups",
+    "ConstraintLayout",
+    "FixedStep",
+    "GaitReference",
+    "GroupColumns",
+    "StepEvaluator",
+    "batch_row",
+    "constraint_layout",
+    "gait_reference",
+    "worst_violation",
+]
+
+_PACK_BLOCK = 8  # long constraint groups reach SLSQP as minima over blocks of grid points
+# an SLSQP run still infeasible after _STALL_ITERATIONS iterations (violation, the sum of the
+# negative constraints, above _STALL_VIOLATION) stops once its last _STALL_WINDOW iterations
+# brought the violation below _STALL_GAIN times its earlier best no more
+_STALL_ITERATIONS, _STALL_WINDOW, _STALL_GAIN, _STALL_VIOLATION = 25, 5, 0.95, 1e-4
+_FD_STEP = math.sqrt(np.finfo(float).eps)  # forward-difference step of the Jacobians
+
+
+# ---------------------------------------------------------------------------- constraint groups
+class ConstraintGroup(NamedTuple):
+    """One group of constraints of the step problem.
+
+    Attributes:
+        name: the group's name (its field in :data:`GroupColumns`).
+        violation: the constraint a violated group reports (:class:`PlanningError`).
+        size: entries of the group from ``(N, K + 1, F)``: Chebyshev nodes, points of the
+            uniform check grid, vertical faces between the stance foot and the foothold.
+        periodic_only: the group exists for the periodic gait only (last in the table).
+    """
+
+    name: str
+    violation: str
+    size: Callable[[int, int, int], int]
+    periodic_only: bool = False
+
+
+CONSTRAINT_GROUPS: tuple[ConstraintGroup, ...] = (
+    # both grids
+    ConstraintGroup("thetadot_sq", "theta_dot^2 bounded away from zero", lambda n, k, f: n + k),
+    # the reduced inertia keeps its sign
+    ConstraintGroup("alpha", "alpha bounded away from zero", lambda n, k, f: n),
+    ConstraintGroup("torque", "hip input within the actuator limit", lambda n, k, f: n),
+    # swing foot above the terrain between the check points
+    ConstraintGroup("clearance", "swing-foot clearance", lambda n, k, f: k - 1),
+    # normal force, then friction cone
+    ConstraintGroup(
+        "stance_reaction", "stance foot loaded and not slipping", lambda n, k, f: 2 * n
+    ),
+    # armed before touchdown, clear when armed
+    ConstraintGroup(
+        "armed", "swing foot reaches the arming distance above ground", lambda n, k, f: 2
+    ),
+    ConstraintGroup("faces", "vertical faces cleared", lambda n, k, f: 1 + f),
+    ConstraintGroup("touchdown", "transversal touchdown", lambda n, k, f: 1),
+    ConstraintGroup("duration", "step duration bounds", lambda n, k, f: 2),
+    # impulse into the ground, then in the cone
+    ConstraintGroup("impact", "impact impulse in the friction cone", lambda n, k, f: 2),
+    ConstraintGroup("trailing_foot", "trailing foot takes off", lambda n, k, f: 1),
+    ConstraintGroup("post_impact_speed", "post-impact theta_dot positive", lambda n, k, f: 1),
+    # stable, real fixed point of the step-to-step map
+    ConstraintGroup(
+        "periodic", "periodic orbit exists and is stable", lambda n, k, f: 2, periodic_only=True
+    ),
+)
+
+# first column of each constraint group, by name (the record the kernel reads)
+GroupColumns = namedtuple("GroupColumns", [g.name for g in CONSTRAINT_GROUPS])
+
+
+class ConstraintLayout(NamedTuple):
+    """Where the constraint groups of one step problem lie.
+
+    Attributes:
+        offsets: first column of each group present, then the number of columns (int64).
+        columns: :data:`GroupColumns`, first column by group name (an absent group: the end).
+        packed: length of the constraint vector SLSQP gets (:func:`kernel.pack`).
+    """
+
+    offsets: np.ndarray
+    columns: tuple
+    packed: int
+
+
+def constraint_layout(nodes: int, checks: int, faces: int, periodic: bool) -> ConstraintLayout:
+    """The layout of :data:`CONSTRAINT_GROUPS` for ``nodes = N`` Chebyshev nodes, ``checks = K +
+    1`` check points and ``faces`` vertical faces (``periodic``: with the periodic-gait group)."""
+    groups = [g for g in CONSTRAINT_GROUPS if periodic or not g.periodic_only]
+    sizes = [g.size(nodes, checks, faces) for g in groups]
+    offsets = np.concatenate([[0], np.cumsum(sizes)]).astype(np.int64)
+    first = dict(zip([g.name for g in groups], offsets.tolist()))
+    end = int(offsets[-1])
+    columns = GroupColumns(*(first.get(g.name, end) for g in CONSTRAINT_GROUPS))
+    return ConstraintLayout(offsets, columns, kernel.packed_size(sizes, _PACK_BLOCK))
+
+
+class ConstraintGroups:
+    """The constraint groups of a batched evaluation: column blocks of ``G``, sliced on use."""
+
+    def __init__(self, G: np.ndarray, offsets: np.ndarray):
+        self.G, self.offsets = G, offsets
+
+    def __len__(self) -> int:
+        return self.offsets.size - 1
+
+    def __getitem__(self, i: int) -> np.ndarray:
+        return self.G[:, self.offsets[i] : self.offsets[i + 1]]
+
+    def __iter__(self):
+        return (self[i] for i in range(len(self)))
+
+
+def worst_violation(groups: list[np.ndarray]) -> tuple[float, str]:
+    """The most negative constraint of one evaluation's groups and its group's
+    :attr:`ConstraintGroup.violation` (``(0.0, "")`` when none is violated)."""
+    worst, name = 0.0, ""
+    for g, group in zip(groups, CONSTRAINT_GROUPS):
+        m = float(np.min(g)) if np.size(g) else 0.0
+        if not math.isfinite(m):
+            m = -math.inf
+        if m < worst:
+            worst, name = m, group.violation
+    return worst, name
+
+
+# ---------------------------------------------------------------------------- step model
+@dataclass
+class FixedStep:
+    """Data of one step that the optimiser does not change (rad, rad/s, m)."""
+
+    theta_plus: float
+    a0: float
+    slope: float  # phi'(theta_plus)
+    thetadot_plus: float
+    stance: tuple[float, float]
+    foothold: tuple[float, float]
+    theta_minus: float
+    a_last: float
+    thetadot_minus_ref: float = math.nan  # end-of-step speed aimed at (nan: the gait's)
+
+
+class GaitReference(NamedTuple):
+    """What the step costs pull towards: the periodic gait's end-of-step ``theta_dot`` [rad/s],
+    post-impact slope, normalised shape (coefficients relative to the chord ``a_0 -> a_M``),
+    speed [m/s] and impact gain."""
+
+    thetadot_minus: float
+    slope_plus: float
+    shape: np.ndarray
+    speed: float
+    delta: float
+
+
+def gait_reference(gait: PeriodicGait) -> GaitReference:
+    """The :class:`GaitReference` of a periodic gait."""
+    a = gait.step.coeffs
+    base = a[0] + (a[-1] - a[0]) * np.arange(a.size) / (a.size - 1)
+    rel = (a - base) / (a[-1] - a[0])
+    return GaitReference(
+        gait.step.thetadot_minus, gait.step.slope_plus, rel, gait.speed, gait.step.delta
+    )
+
+
+class StepEvaluator:
+    """Vectorised evaluation of one step's constraints and cost for the free coefficients.
+
+    Args:
+        params: robot parameters.
+        config: planner settings.
+        tmap: the terrain.
+
+    Attributes:
+        ref: the :class:`GaitReference` the cost pulls towards; None for the periodic gait itself
+            (whose cost is the speed error and the mean squared input).
+        wscale: scale of the weights that pull a step towards the reference.
+    """
+
+    def __init__(self, params: RobotParams, config: PlannerConfig, tmap: TerrainMap):
+        self.params, self.cfg, self.tmap = params, config, tmap
+        self.P = params.vector()
+        n, m = config.grid, config.order
+        s = 0.5 * (rd.cheb_nodes(n) + 1.0)
+        B = [bernstein_basis(m, s, d) for d in range(3)]
+        l = params.l  # noqa: E741
+        self.l = l
+        alpha_scale = model.mass_matrix(self.P, 0.0)[2]
+        u_lim = config.torque_fraction * params.u_max
+        # uniform grid for the geometric checks (swing-foot clearance, faces, theta_dot^2)
+        sg = np.linspace(0.0, 1.0, config.check_points + 1)
+        Bg = bernstein_basis(m, sg, 0)
+        interp = np.polynomial.chebyshev.chebvander(2.0 * sg - 1.0, n) @ np.linalg.inv(
+            np.polynomial.chebyshev.chebvander(rd.cheb_nodes(n), n)
+        )
+        ramp = np.minimum(1.0, (1.0 - sg) / config.clearance_ramp)
+        clear_req = config.clearance * ramp
+        qint = np.ascontiguousarray(rd.cumulative_integral_matrix(n))
+        self.grids = StepGrids(s, B[0], B[1], B[2], sg, Bg, qint, interp, clear_req)
+        self.ref: GaitReference | None = None
+        self.wscale = 1.0
+        self._face_cache: dict[tuple, tuple[StepGround, float, float]] = {}
+        self._layouts: dict[tuple, ConstraintLayout] = {}
+        settings = StepSettings(
+            min_thetadot=config.min_thetadot,
+            alpha_scale=alpha_scale,
+            u_lim=u_lim,
+            u_max=params.u_max,
+            retract=config.retract * l,
+            arm=config.arm_distance * l,
+            arm_clearance=config.arm_clearance,
+            clearance=config.clearance,
+            clearance_ramp=config.clearance_ramp,
+            retracted_clearance=config.retracted_clearance,
+            face_clearance=config.face_clearance,
+            touchdown_slope=config.touchdown_slope,
+            friction=config.friction,
+            duration_min=config.duration_min,
+            duration_max=config.duration_max,
+            weight=(2 * params.m + params.mHg) * params.g,
+            mass=params.total_mass,
+            w_speed=config.w_speed,
+            w_torque=config.w_torque,
+            w_end=config.w_end,
+            w_slope=config.w_slope,
+            w_shape=config.w_shape,
+        )
+        self.settings = StepSettings(*(float(v) for v in settings))
+
+    def coeffs(
+        self,
+        fx: FixedStep,
+        free: np.ndarray,
+        periodic: bool = False,
+        slope: np.ndarray | float | None = None,
+    ) -> np.ndarray:
+        """Coefficients ``a_0 .. a_M`` for free coefficients ``free`` (shape ``(k,)`` or a batch
+        ``(B, k)``; the result has the same leading shape). ``slope`` overrides ``fx.slope``."""
+        m = self.cfg.order
+        span = fx.theta_minus - fx.theta_plus
+        x = np.asarray(free, dtype=np.float64)
+        a = np.empty(x.shape[:-1] + (m + 1,))
+        a[..., 0] = fx.a0
+        a[..., 2:m] = x
+        a[..., m] = fx.a_last
+        sl = fx.slope if slope is None else slope
+        if periodic:  # the step's own post-impact direction
+            _, sl = rd.impact_along_constraint(
+                self.P, a[..., m], m * (a[..., m] - a[..., m - 1]) / span
+            )
+        a[..., 1] = fx.a0 + sl * span / m
+        return a
+
+    def evaluate(self, fx: FixedStep, free: np.ndarray, periodic: bool = False) -> dict[str, Any]:
+        """Everything about the step with free coefficients ``free`` (shape ``(k,)``).
+
+        With ``periodic``, ``a_1`` and ``thetadot_plus`` are those of a period-one gait (the
+        step's end maps onto its start); ``fx.slope`` and ``fx.thetadot_plus`` are ignored.
+        """
+        return batch_row(
+            self.evaluate_batch(fx, np.asarray(free, dtype=np.float64)[None, :], periodic), 0
+        )
+
+    def evaluate_batch(
+        self,
+        fx: FixedStep,
+        free: np.ndarray,
+        periodic: bool = False,
+        slope: np.ndarray | None = None,
+        thetadot_plus: np.ndarray | None = None,
+    ) -> dict[str, Any]:
+        """:meth:`evaluate` for a batch of free-coefficient vectors ``free`` (shape ``(B, k)``);
+        every entry of the result has a leading axis of length ``B`` (``groups``: a list of
+        ``(B, n_i)`` arrays; ``g``: the packed constraint vectors). ``slope`` and
+        ``thetadot_plus`` (shape ``(B,)``) override ``fx.slope`` and ``fx.thetadot_plus`` row by
+        row (the start of a step that follows a step being optimised)."""
+        with np.errstate(all="ignore"):
+            return self._evaluate(
+                fx, np.asarray(free, dtype=np.float64), periodic, slope, thetadot_plus
+            )
+
+    def _faces(self, xs: float, x_foot: float) -> tuple[StepGround, float, float]:
+        """The ground between the stance foot and the foothold (terrain and the faces crossed),
+        and the ground slopes under the stance foot and the foothold."""
+        key = (xs, x_foot)
+        out = self._face_cache.get(key)
+        if out is None:
+            faces = self.tmap.faces_between(xs, x_foot)
+            arm = self.cfg.arm_distance * self.l
+            ground = StepGround(
+                self.tmap.xs,
+                self.tmap.ys,
+                np.array([f[0] for f in faces], dtype=np.float64),
+                np.array([f[1] for f in faces], dtype=np.float64),
+                np.array([f[0] - xs >= arm for f in faces], dtype=np.bool_),
+            )
+            out = (ground, self.tmap.terrain.slope_at(xs), self.tmap.terrain.slope_at(x_foot))
+            if len(self._face_cache) > 64:
+                self._face_cache.clear()
+            self._face_cache[key] = out
+        return out
+
+    def _evaluate(self, fx, free, periodic, slope_in, thd_in) -> dict[str, Any]:
+        cfg, grids = self.cfg, self.grids
+        nb = free.shape[0]
+        a = np.ascontiguousarray(self.coeffs(fx, free, periodic, slope_in))
+        span = fx.theta_minus - fx.theta_plus
+        xs, ys = fx.stance
+        ground, slope_stance, slope_foot = self._faces(xs, fx.foothold[0])
+        n_faces = ground.face_x.size
+        layout = self._layouts.get((n_faces, periodic))
+        if layout is None:
+            layout = self._layouts[n_faces, periodic] = constraint_layout(
+                grids.nodes.size, grids.check.size, n_faces, periodic
+            )
+        fmin = (
+            max(cfg.min_thetadot, cfg.gait_min_thetadot) ** 2 if periodic else cfg.min_thetadot**2
+        )
+        thm_ref = slope_ref = delta_ref = 0.0
+        if self.ref is None:  # periodic gait: speed target and effort
+            v_target = cfg.target_speed
+            shape_ref = np.zeros(a.shape[1])
+        else:  # steps: the periodic gait's speed, end speed and shape (zero cost on the gait)
+            thm_ref, slope_ref, shape_ref, v_target, delta_ref = self.ref
+            if math.isfinite(fx.thetadot_minus_ref):
+                thm_ref = fx.thetadot_minus_ref
+        scalars = StepScalars(
+            fmin=fmin,
+            xs=xs,
+            ys=ys,
+            slope_stance=slope_stance,
+            slope_foot=slope_foot,
+            foot_x=fx.foothold[0],
+            theta_plus=fx.theta_plus,
+            span=span,
+            wscale=self.wscale,
+            v_target=v_target,
+            thetadot_minus_ref=thm_ref,
+            slope_ref=slope_ref,
+            delta_ref=delta_ref,
+        )
+        scalars = StepScalars(*(float(v) for v in scalars))
+        if periodic or thd_in is None:
+            thd_plus = np.full(nb, float(fx.thetadot_plus))
+        else:
+            thd_plus = np.ascontiguousarray(thd_in, dtype=np.float64)
+        out = StepOutputs.allocate(nb, int(layout.offsets[-1]), grids.nodes.size)
+        kernel.evaluate_steps(
+            self.P,
+            a,
+            thd_plus,
+            periodic,
+            self.ref is not None,
+            np.ascontiguousarray(shape_ref, dtype=np.float64),
+            self.settings,
+            scalars,
+            grids,
+            ground,
+            layout.columns,
+            out,
+        )
+        g = np.empty((nb, layout.packed))
+        kernel.pack(out.constraints, layout.offsets, _PACK_BLOCK, g)
+        return {
+            "a": a,
+            "f": out.thetadot_sq,
+            "T": out.duration,
+            "u": out.input,
+            "groups": ConstraintGroups(out.constraints, layout.offsets),
+            "g": g,
+            "cost": out.cost,
+            "thetadot_minus": out.thetadot_minus,
+            "delta": out.delta,
+            "slope_plus": out.slope_plus,
+            "speed": out.speed,
+            "arm_theta": out.arm_theta,
+            "thetadot_plus": out.thetadot_plus,
+            "gain": out.gain,
+        }
+
+
+def batch_row(ev: dict[str, Any], r: int) -> dict[str, Any]:
+    """Row ``r`` of a batched step evaluation, as :meth:`StepEvaluator.evaluate` returns it."""
+    out: dict[str, Any] = {}
+    for key, v in ev.items():
+        if key == "groups":
+            out[key] = [g[r] for g in v]
+        elif np.ndim(v) == 1:
+            out[key] = float(v[r])
+        else:
+            out[key] = v[r]
+    return out
+
+
+# ---------------------------------------------------------------------------- SLSQP adaptor
+class BatchProblem:
+    """Cost and constraints of a batched evaluator for SLSQP, cached by point.
+
+    ``fn(X)`` evaluates the rows of ``X`` (shape ``(B, k)``) and returns ``(cost, g, ev)``:
+    costs ``(B,)``, packed constraints ``(B, m)`` and any batch payload (kept with the row
+    index). The Jacobians are forward differences whose ``k`` perturbed points are evaluated in
+    one batched call (the same derivatives SLSQP would take by itself, at a fraction of the cost).
+    """
+
+    def __init__(self, fn: Callable[[np.ndarray], tuple[np.ndarray, np.ndarray, Any]]):
+        self.fn = fn
+        self.cache: dict[bytes, tuple[float, np.ndarray, Any, int]] = {}
+        self._jac: dict[bytes, tuple[np.ndarray, np.ndarray]] = {}
+
+    def _fill(self, X: np.ndarray) -> None:
+        keys = [x.tobytes() for x in X]
+        todo = [i for i, k in enumerate(keys) if k not in self.cache]
+        if not todo:
+            return
+        cost, g, ev = self.fn(X[todo])
+        for r, i in enumerate(todo):
+            self.cache[keys[i]] = (float(cost[r]), g[r], ev, r)
+
+    def get(self, x: np.ndarray) -> tuple[float, np.ndarray, Any, int]:
+        """``(cost, g, payload, row)`` at ``x``."""
+        x = np.ascontiguousarray(x, dtype=np.float64)
+        self._fill(x[None, :])
+        return self.cache[x.tobytes()]
+
+    def evaluate_many(self, X: np.ndarray) -> list[tuple[float, np.ndarray, Any, int]]:
+        """:meth:`get` for every row of ``X`` in one batched call."""
+        X = np.ascontiguousarray(X, dtype=np.float64)
+        self._fill(X)
+        return [self.cache[x.tobytes()] for x in X]
+
+    def _jacobians(self, x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        x = np.ascontiguousarray(x, dtype=np.float64)
+        key = x.tobytes()
+        hit = self._jac.get(key)
+        if hit is not None:  # SLSQP asks for the cost's and the constraints' at each point
+            return hit
+        X = _fd_points(x)
+        rows = self.evaluate_many(X)
+        h = np.diag(X[1:]) - x  # the steps actually taken
+        c0, g0 = rows[0][0], rows[0][1]
+        with np.errstate(all="ignore"):
+            dc = np.array([r[0] - c0 for r in rows[1:]]) / h
+            dg = np.stack([r[1] - g0 for r in rows[1:]], axis=1) / h
+        # a point where the step model breaks down (NaN mapped to +-1e3) gives huge slopes
+        for d in (dc, dg):
+            d[np.isnan(d)] = 0.0
+            np.clip(d, -1e12, 1e12, out=d)
+        self._jac[key] = dc, dg
+        return dc, dg
+
+    def _with_jacobian_points(self, x: np.ndarray) -> tuple[float, np.ndarray, Any, int]:
+        """:meth:`get`, evaluating the forward-difference points around ``x`` in the same
+        batched call (along a converging run SLSQP asks for the Jacobians at every point it
+        evaluates, and a batch costs little more than a single point)."""
+        x = np.ascontiguousarray(x, dtype=np.float64)
+        key = x.tobytes()
+        if key not in self.cache:
+            self._fill(_fd_points(x))
+        return self.cache[key]
+
+    def minimize(
+        self, x0: np.ndarray, maxiter: int, ftol: float, stall: bool = False
+    ) -> np.ndarray:
+        """SLSQP from ``x0``; returns the final point. With ``stall``, a run that stops making
+        progress towards feasibility ends early (see ``_STALL_ITERATIONS``)."""
+        hist: list[float] = []  # constraint violation after each iteration
+
+        def stop_when_stalled(intermediate_result):
+            g = self.get(intermediate_result.x)[1]
+            hist.append(float(-np.sum(np.minimum(g, 0.0))))
+            w = _STALL_WINDOW
+            if len(hist) >= _STALL_ITERATIONS and hist[-1] > _STALL_VIOLATION:
+                if min(hist[-w:]) > _STALL_GAIN * min(hist[:-w]):  # no progress to feasibility
+                    raise StopIteration
+
+        res = minimize(
+            lambda x: self._with_jacobian_points(x)[0],
+            np.asarray(x0, dtype=np.float64),
+            callback=stop_when_stalled if stall else None,
+            jac=lambda x: self._jacobians(x)[0],
+            method="SLSQP",
+            constraints=[
+                {
+                    "type": "ineq",
+                    "fun": lambda x: self._with_jacobian_points(x)[1],
+                    "jac": lambda x: self._jacobians(x)[1],
+                }
+            ],
+            options={"maxiter": maxiter, "ftol": ftol},
+        )
+        return np.asarray(res.x)
+
+
+def _fd_points(x: np.ndarray) -> np.ndarray:
+    """``x`` and its ``k`` forward-difference neighbours (rows)."""
+    k = x.size
+    X = np.empty((k + 1, k))
+    X[:] = x
+    X[1:] += _FD_STEP * np.eye(k)
+    return X

@@ -1,0 +1,26 @@
+"""Terrain cases of the planner tests, per robot."""
+
+from envs.params import CONFIG_DIR
+from envs.terrain import Terrain
+
+PAPER_STAIRS = Terrain.from_yaml(CONFIG_DIR / "terrains" / "paper_stairs.yaml")
+# terrain cases per robot (the classic walker's legs are l = 1 m, the paper robot's 0.32 m)
+CASES = {
+    "paper": {
+        "flat": Terrain.flat(),
+        "paper_stairs": PAPER_STAIRS,
+        "stairs_up": Terrain.staircase(0.4, 3, 0.3, 0.01),
+        "blocks_low": Terrain.random_blocks(1, 0.3, 3.0, (0.15, 0.3), (-0.003, 0.003)),
+        "blocks_high": Terrain.random_blocks(1, 0.3, 3.0, (0.15, 0.3), (-0.01, 0.01)),
+    },
+    "classic": {
+        "flat": Terrain.flat(),
+        "stairs_down": Terrain.stairs([1.25, 1.94], [-0.01, -0.01]),
+        "stairs_up": Terrain.staircase(1.0, 3, 1.0, 0.01),
+        "blocks_low": Terrain.random_blocks(1, 1.0, 6.0, (0.45, 0.9), (-0.0025, 0.0025)),
+        "blocks_high": Terrain.random_blocks(1, 1.0, 6.0, (0.45, 0.9), (-0.005, 0.005)),
+        "downhill": Terrain.slope(-0.0525),
+    },
+}
+HORIZON = {"paper": 7, "classic": 7}
+ALL_CASES = [(r, t) for r in CASES for t in CASES[r]]

@@ -1,0 +1,123 @@
+"""The step problem: batched evaluation, the constraint-group table and its layout."""
+
+import numpy as np
+import pytest
+
+from controllers.planner import TerrainMap
+from controllers.planner.kernel import StepOutputs, packed_size
+from controllers.planner.problem import (
+    CONSTRAINT_GROUPS,
+    ConstraintGroups,
+    FixedStep,
+    StepEvaluator,
+    constraint_layout,
+    gait_reference,
+    worst_violation,
+)
+
+from .cases import CASES
+
+
+def test_batched_step_evaluation_matches_single_points(planners):
+    """The vectorised evaluation of many candidate shapes (used for the SLSQP Jacobians and the
+    global search) gives, row by row, the constraints and cost of evaluating each alone."""
+    pl = planners["paper"]
+    g = pl.periodic_gait()
+    st = g.step
+    sm = StepEvaluator(pl.params, pl.config, TerrainMap(CASES["paper"]["blocks_high"]))
+    sm.ref = gait_reference(g)
+    assert sm.ref.delta == st.delta
+    fx = FixedStep(
+        st.theta_plus,
+        st.coeffs[0],
+        st.slope_plus,
+        st.thetadot_plus,
+        (0.25, 0.0),
+        (0.25 + st.step_length, 0.0),
+        st.theta_minus,
+        st.coeffs[-1],
+    )
+    x = st.coeffs[2:-1] + 0.05 * np.random.default_rng(0).standard_normal((6, st.coeffs.size - 3))
+    batch = sm.evaluate_batch(fx, x)
+    for i in range(len(x)):
+        one = sm.evaluate(fx, x[i])
+        np.testing.assert_allclose(batch["g"][i], one["g"], rtol=1e-12, atol=1e-14)
+        assert batch["cost"][i] == pytest.approx(one["cost"], rel=1e-12)
+        assert batch["T"][i] == pytest.approx(one["T"], rel=1e-12)
+    # the fixed coefficients come from the step's start and end
+    np.testing.assert_allclose(sm.evaluate(fx, st.coeffs[2:-1])["a"], st.coeffs, atol=1e-12)
+
+
+def test_constraint_layout_follows_the_table():
+    """Each group of the table gets a block of columns of its size, in the table's order (the
+    periodic-gait group last and only for the periodic gait); the kernel's columns by name are
+    the blocks' first columns."""
+    assert [g.periodic_only for g in CONSTRAINT_GROUPS] == [False] * 12 + [True]
+    assert len({g.name for g in CONSTRAINT_GROUPS}) == len(CONSTRAINT_GROUPS)
+    n, k, f = 33, 97, 2
+    for periodic in (False, True):
+        lay = constraint_layout(n, k, f, periodic)
+        groups = [g for g in CONSTRAINT_GROUPS if periodic or not g.periodic_only]
+        assert lay.offsets[0] == 0 and lay.offsets.dtype == np.int64
+        assert np.diff(lay.offsets).tolist() == [g.size(n, k, f) for g in groups]
+        assert lay.columns._fields == tuple(g.name for g in CONSTRAINT_GROUPS)
+        for g, first in zip(groups, lay.offsets):
+            assert getattr(lay.columns, g.name) == first
+        if not periodic:
+            assert lay.columns.periodic == lay.offsets[-1]
+        assert lay.packed == packed_size(np.diff(lay.offsets).tolist(), 8)
+    # the sizes the kernel documents: N + K + 1, N, N, K, 2 N, 2, 1 + F, 1, 2, 2, 1, 1, (2)
+    sizes = np.diff(constraint_layout(n, k, f, True).offsets).tolist()
+    assert sizes == [n + k, n, n, k - 1, 2 * n, 2, 1 + f, 1, 2, 2, 1, 1, 2]
+
+
+@pytest.mark.parametrize("periodic", [False, True])
+def test_the_kernel_writes_every_constraint_column(planners, monkeypatch, periodic):
+    """No column of the constraint matrix is left as allocated, with or without the periodic
+    group, with vertical faces between the stance foot and the foothold."""
+    allocate = StepOutputs.allocate.__func__
+
+    def nan_filled(cls, rows, columns, nodes):
+        out = allocate(cls, rows, columns, nodes)
+        for a in out:
+            a.fill(np.nan)
+        return out
+
+    monkeypatch.setattr(StepOutputs, "allocate", classmethod(nan_filled))
+    pl = planners["paper"]
+    g = pl.periodic_gait()
+    st = g.step
+    tmap = TerrainMap(CASES["paper"]["stairs_up"])
+    sm = StepEvaluator(pl.params, pl.config, tmap)
+    x0 = 0.4 - 0.5 * st.step_length  # the first riser lies between stance foot and foothold
+    fx = FixedStep(
+        st.theta_plus,
+        st.coeffs[0],
+        st.slope_plus,
+        st.thetadot_plus,
+        (x0, 0.0),
+        (x0 + st.step_length, 0.01),
+        st.theta_minus,
+        st.coeffs[-1],
+    )
+    if not periodic:
+        sm.ref = gait_reference(g)
+    assert len(tmap.faces_between(x0, x0 + st.step_length)) == 1
+    ev = sm.evaluate_batch(fx, np.stack([st.coeffs[2:-1]] * 3), periodic=periodic)
+    G = ev["groups"].G
+    assert not np.any(np.isnan(G))
+    groups = [c for c in CONSTRAINT_GROUPS if periodic or not c.periodic_only]
+    assert len(ev["groups"]) == len(groups)
+    for grp, block in zip(groups, ev["groups"]):
+        assert block.shape == (3, grp.size(sm.grids.nodes.size, sm.grids.check.size, 1))
+
+
+def test_worst_violation_names_the_group_of_the_table():
+    n, k, f = 5, 9, 0
+    lay = constraint_layout(n, k, f, True)
+    for i, grp in enumerate(CONSTRAINT_GROUPS):
+        G = np.ones((1, lay.offsets[-1]))
+        G[0, lay.offsets[i]] = -0.5
+        rows = [block[0] for block in ConstraintGroups(G, lay.offsets)]
+        assert worst_violation(rows) == (-0.5, grp.violation)
+    assert worst_violation([np.ones(3)]) == (0.0, "")

@@ -1,0 +1,60 @@
+"""The search over steps: replanning from the actual state, reuse of solved step problems, speed
+regulation over several replanning calls."""
+
+import numpy as np
+import pytest
+
+from controllers.planner import GaitPlanner
+
+from .cases import CASES, PAPER_STAIRS
+
+
+def test_speed_is_regulated_after_stairs_down(planners):
+    """The paper robot speeds up going down the stairs and slows back towards the gait."""
+    pl = planners["paper"]
+    g = pl.periodic_gait()
+    terr = PAPER_STAIRS
+    state, stance, prev, td = (g.q, g.qd), (0.0, 0.0), None, []
+    for _ in range(12):
+        plan = pl.plan(terr, state, stance, horizon=4, previous_plan=prev)
+        s = plan[0]
+        td.append(s.thetadot_plus)
+        state, stance, prev = s.post_impact_state(), s.foothold, plan
+    assert stance[1] == pytest.approx(-0.06)
+    assert max(td) > 1.1 * g.qd[1]  # it did speed up on the stairs
+    assert abs(td[-1] - g.qd[1]) < 0.3 * (max(td) - g.qd[1])  # and came back towards the gait
+
+
+def test_replanning_starts_on_the_actual_state_and_reuses_the_previous_plan(planners):
+    pl = planners["paper"]
+    g = pl.periodic_gait()
+    plan = pl.plan(PAPER_STAIRS, (g.q, g.qd), (0.0, 0.0), horizon=4)
+    q, qd = plan[0].post_impact_state()
+    # on the plan: the new plan's first step is the old plan's second one
+    again = pl.plan(PAPER_STAIRS, (q, qd), plan[0].foothold, horizon=4, previous_plan=plan)
+    np.testing.assert_allclose(again[0].coeffs, plan[1].coeffs, atol=1e-6)
+    assert again[0].foothold == plan[1].foothold
+    # off the plan: y = 0 and y_dot = 0 at the actual post-impact state
+    qa, qda = q + np.array([0.01, 0.0]), qd * np.array([0.9, 1.05])
+    off = pl.plan(PAPER_STAIRS, (qa, qda), plan[0].foothold, horizon=4, previous_plan=plan)
+    s = off[0]
+    assert qa[0] - s.phi(qa[1]) == pytest.approx(0.0, abs=1e-14)
+    assert qda[0] - s.dphi(qa[1]) * qda[1] == pytest.approx(0.0, abs=1e-13)
+    assert s.thetadot_plus == pytest.approx(qda[1])
+    assert np.isfinite(off.solve_time) and off.solve_time > 0
+
+
+def test_reused_step_solutions_do_not_depend_on_other_terrains(planners):
+    """Replanning reuses solved step problems; a planner that planned another terrain first
+    makes the same plan as a fresh one."""
+    pl = planners["paper"]
+    g = pl.periodic_gait()
+    rough = CASES["paper"]["blocks_high"]
+    first = pl.plan(PAPER_STAIRS, (g.q, g.qd), (0.0, 0.0), horizon=4)
+    used = pl.plan(rough, (g.q, g.qd), (0.0, 0.0), horizon=4, previous_plan=first)
+    fresh = GaitPlanner("paper").plan(
+        rough, (g.q, g.qd), (0.0, 0.0), horizon=4, previous_plan=first
+    )
+    np.testing.assert_allclose(used.footholds, fresh.footholds)
+    for a, b in zip(used, fresh):
+        np.testing.assert_allclose(a.coeffs, b.coeffs, atol=1e-12)
