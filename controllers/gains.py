@@ -96,11 +96,11 @@ class GainTable:
     phi_coeffs: np.ndarray
     speed_theta0: float
     speed_step: float
-    thetadot_sq: np.ndarray
-    dthetadot_sq: np.ndarray
+    thetadot_sq: np.ndarray = field(repr=False)
+    dthetadot_sq: np.ndarray = field(repr=False)
     gain_theta0: float
     gain_step: float
-    gains: np.ndarray
+    gains: np.ndarray = field(repr=False)
     u_max: float
     late_blend: float
     scalars: np.ndarray = field(init=False, repr=False, compare=False)
@@ -140,11 +140,11 @@ class GainTable:
             span=c.span,
             phi_coeffs=m0.power_coefficients,
             speed_theta0=a,
-            speed_step=th[1] - th[0],
+            speed_step=float(th[1] - th[0]),
             thetadot_sq=np.ascontiguousarray(m0.thetadot_sq(th)),
             dthetadot_sq=np.ascontiguousarray(m0.dthetadot_sq(th)),
-            gain_theta0=solution.theta[0],
-            gain_step=solution.theta[1] - solution.theta[0],
+            gain_theta0=float(solution.theta[0]),
+            gain_step=float(solution.theta[1] - solution.theta[0]),
             gains=np.ascontiguousarray(solution.K),
             u_max=u_max,
             late_blend=late_blend,

@@ -125,10 +125,12 @@ class StepModel:
 
     @property
     def theta_plus(self) -> float:
+        """Phase at the start of the step [rad]."""
         return self.constraint.theta_plus
 
     @property
     def theta_minus(self) -> float:
+        """Phase at the planned impact [rad]."""
         return self.constraint.theta_minus
 
     def thetadot_sq(self, theta: np.ndarray | float) -> np.ndarray | float:

@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from controllers.controller import ControllerConfig, PDController, TransverseController
-from envs import model
+from envs import model, simulate
 from envs.simulator import Simulator
 from envs.terrain import Terrain
 
@@ -211,8 +211,6 @@ def test_value_of_feedback_on_the_paper_stairs():
 
 def test_usable_as_torque_callable_of_simulate():
     """envs.simulate(..., torque=controller): impacts detected from the state, replanning."""
-    from envs import simulate
-
     ctrl = TransverseController("paper", "flat")
     gait = ctrl.planner.periodic_gait()
     ctrl.reset(gait.q, gait.qd)

@@ -5,7 +5,7 @@ import numpy as np
 import pytest
 
 import envs  # noqa: F401  (registers the ids)
-from controllers import PDPolicy, ReferencePolicy, make_reference_policy
+from controllers import PDPolicy, ReferencePolicy, make_reference_policy, policy
 
 COURSE_END = 1.1  # hip distance [m]: past both stairs and three or more steps on the flat
 
@@ -95,7 +95,5 @@ def test_bad_observations_and_modes_raise():
 
 
 def test_former_module_name_still_imports():
-    from controllers import policy
-
     assert policy.ReferencePolicy is ReferencePolicy
     assert policy.PDPolicy is PDPolicy and policy.make_reference_policy is make_reference_policy

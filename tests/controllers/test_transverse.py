@@ -4,9 +4,11 @@ import numpy as np
 import pytest
 from scipy.integrate import solve_ivp
 
+from controllers.bezier import BezierConstraint
 from controllers.reduced import pfl_terms
-from controllers.transverse import impact_jacobian, impact_jacobian_fd, surface_state
+from controllers.transverse import StepModel, impact_jacobian, impact_jacobian_fd, surface_state
 from envs import model
+from envs.params import RobotParams
 
 K0 = np.array([0.5, -30.0, -9.0])  # some fixed feedback v = K0 x_perp for the closed loop
 
@@ -138,10 +140,6 @@ def test_margin_shrinks_where_the_continued_constraint_is_singular():
     """A step onto a 1 cm rise replanned in closed loop (classic walker): its order-6
     constraint continued 15 % past theta- makes alpha change sign; the extension shrinks
     instead of the step being rejected, and the profile on the step is unchanged."""
-    from controllers.bezier import BezierConstraint
-    from controllers.transverse import StepModel
-    from envs.params import RobotParams
-
     P = RobotParams.from_preset("classic").vector()
     a = [-0.29102594500881324, -0.2640678151438681, 0.0928026563809734, 1.3565597272147574]
     a += [0.13804921681533533, 0.30097754751602745, 0.273031028035243]
