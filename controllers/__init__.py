@@ -6,9 +6,10 @@ transverse linearization, jump-Riccati receding-horizon control, observer, refer
 from .bezier import BezierConstraint, bernstein_basis, bezier
 from .controller import ControllerConfig, PDController, TransverseController
 from .footsteps import FootholdRules, TerrainMap
+from .gains import GainTable
 from .observer import HighGainObserver
 from .planner import GaitPlanner, PeriodicGait, Plan, PlannerConfig, PlanningError, StepPlan
-from .policy import PDPolicy, ReferencePolicy, make_reference_policy
+from .reference import PDPolicy, ReferencePolicy, make_reference_policy
 from .riccati import solve_jump_riccati
 
 __all__ = [
@@ -24,6 +25,7 @@ __all__ = [
     "bernstein_basis",
     "bezier",
     "ControllerConfig",
+    "GainTable",
     "HighGainObserver",
     "PDController",
     "PDPolicy",

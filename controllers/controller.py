@@ -5,15 +5,13 @@ At every footstep the controller
 1. (re)plans the motion from the actual post-impact state with the gait planner
    (:class:`controllers.planner.GaitPlanner`), or, with ``replan=False``, keeps following one plan
    made at :meth:`TransverseController.reset`;
-2. linearises the transverse dynamics of the current step and the next ``horizon`` steps
-   (:mod:`controllers.transverse`), with the phase ``theta`` as independent variable;
-3. solves the jump-Riccati equation backwards from ``Z(t_f) = 0`` over those steps
-   (:mod:`controllers.riccati`) and keeps the gain ``K(theta) = -R^-1 B' Z^-1`` of the current
-   step on a uniform ``theta`` grid.
+2. linearises the transverse dynamics of the current step and the next ``horizon`` steps and
+   solves the jump-Riccati equation over them (:func:`controllers.gains.horizon_gains`), and
+   loads the current step's :class:`controllers.gains.GainTable`.
 
 Every control tick then applies ``v = K(theta) x_perp`` and the partial feedback linearisation
 ``u = (v - R) / N`` (``y_ddot = N u + R``, hip friction included, so it is compensated), clipped to
-the actuator limit. The tick is one compiled function (:func:`feedback_law`).
+the actuator limit: :func:`controllers.feedback.feedback_law`.
 
 If planning fails (:class:`PlanningError`) beyond the second step, the look-ahead is shortened
 to the feasible steps (``fallback = "shorter horizon"``). If it fails earlier, the controller
@@ -35,35 +33,27 @@ from typing import Any
 
 import numpy as np
 import yaml
-from numba import njit
 
 from envs import model
 from envs.config_util import dataclass_from_mapping
 from envs.params import RobotParams, as_params
+from envs.simulator import SimConfig, Simulator
 from envs.terrain import Terrain, as_terrain
 
+from .feedback import constraint_at, feedback_law, thetadot_sq_at
+from .gains import GainTable, HorizonSolution, horizon_gains, pd_gains, step_models
 from .planner import GaitPlanner, Plan, PlannerConfig, PlanningError, StepPlan
-from .riccati import solve_jump_riccati
-from .transverse import StepModel, impact_jacobian
+from .transverse import StepModel
 
 __all__ = [
     "ControllerConfig",
     "PDController",
     "StepRecord",
     "TransverseController",
-    "constraint_at",
-    "feedback_law",
-    "horizon_gains",
 ]
-
-_jit = njit(cache=True, error_model="numpy")
 
 #: PD gains (kp [1/s^2], kd [1/s]) used on a last remaining planned step
 FALLBACK_PD = (400.0, 40.0)
-
-# layout of the per-step float table used by the compiled tick
-T_TP, T_SPAN, T_F0, T_FD, T_K0, T_KD, T_UMAX, T_B, T_LATE = range(9)
-N_T = 9
 
 
 # ---------------------------------------------------------------------------- configuration
@@ -131,191 +121,13 @@ class ControllerConfig:
 
     @classmethod
     def from_yaml(cls, path: str | Path) -> ControllerConfig:
+        """Build from a YAML file of the fields (unknown keys raise ``ValueError``)."""
         with open(path) as fh:
             return cls.from_dict(yaml.safe_load(fh) or {})
 
     def to_dict(self) -> dict[str, Any]:
+        """The fields as a plain dict (the inverse of :meth:`from_dict`)."""
         return asdict(self)
-
-
-# ---------------------------------------------------------------------------- compiled tick
-@_jit
-def _hermite(tab0, h, vals, ders, th):
-    """Cubic Hermite interpolation on a uniform grid (clamped to the grid)."""
-    n = vals.size - 1
-    r = (th - tab0) / h
-    if r <= 0.0:
-        return vals[0]
-    if r >= n:
-        return vals[n]
-    k = int(r)
-    if k >= n:
-        k = n - 1
-    t = r - k
-    t2 = t * t
-    t3 = t2 * t
-    return (
-        (2 * t3 - 3 * t2 + 1) * vals[k]
-        + (t3 - 2 * t2 + t) * h * ders[k]
-        + (-2 * t3 + 3 * t2) * vals[k + 1]
-        + (t3 - t2) * h * ders[k + 1]
-    )
-
-
-@_jit
-def constraint_at(tab, pc, q2):
-    """``(phi, phi', phi'')`` of the loaded step at phase ``q2``, including the continuation
-    past the planned touchdown (see ``ControllerConfig.late_blend``)."""
-    span = tab[T_SPAN]
-    s = (q2 - tab[T_TP]) / span
-    late = q2 - (tab[T_TP] + span)  # phase past the planned touchdown [rad]
-    if late > 0.0 and tab[T_LATE] > 0.0:
-        s = 1.0
-    m = pc.size - 1
-    ph = pc[m]
-    dph = 0.0
-    ddph = 0.0
-    for k in range(m - 1, -1, -1):
-        ddph = ddph * s + 2.0 * dph
-        dph = dph * s + ph
-        ph = ph * s + pc[k]
-    dph /= span
-    ddph /= span * span
-    if late > 0.0 and tab[T_LATE] > 0.0:
-        # touchdown is late: stop opening the legs (phi' -> 0 over T_LATE rad), so the hip
-        # falls forward and the swing foot moves down onto the ground
-        d0 = tab[T_LATE]
-        if late < d0:
-            ph = ph + dph * late - 0.5 * dph / d0 * late * late
-            ddph = -dph / d0
-            dph = dph * (1.0 - late / d0)
-        else:
-            ph = ph + 0.5 * dph * d0
-            dph = 0.0
-            ddph = 0.0
-    return ph, dph, ddph
-
-
-@_jit
-def feedback_law(P, x, tab, pc, Fv, Fd, K):
-    """One control tick: input ``u`` [input units] for the state ``x = (q1, q2, q1d, q2d)``.
-
-    Args:
-        P: robot parameter vector.
-        x: state (estimate) ``(q1, q2, q1d, q2d)``.
-        tab: step table (``T_*`` layout): ``theta+``, span, grids of ``F*`` and ``K``, ``u_max``.
-        pc: power-basis coefficients of ``phi`` in ``s = (theta - theta+) / span`` (ascending).
-        Fv, Fd: nominal ``theta_dot^2`` and its ``theta`` derivative on the ``F*`` grid.
-        K: gains ``(n + 1, 3)`` on the ``K`` grid (linear interpolation, clamped).
-
-    Returns:
-        ``(u, I, y, y_dot, v)``.
-    """
-    q1, q2, q1d, q2d = x[0], x[1], x[2], x[3]
-    ph, dph, ddph = constraint_at(tab, pc, q2)
-    y = q1 - ph
-    yd = q1d - dph * q2d
-    I = q2d * q2d - _hermite(tab[T_F0], tab[T_FD], Fv, Fd, q2)
-    nk = K.shape[0] - 1
-    r = (q2 - tab[T_K0]) / tab[T_KD]
-    if r <= 0.0:
-        k0, w = 0, 0.0
-    elif r >= nk:
-        k0, w = nk - 1, 1.0
-    else:
-        k0 = int(r)
-        if k0 >= nk:
-            k0 = nk - 1
-        w = r - k0
-    v = 0.0
-    comp = (I, y, yd)
-    for i in range(3):
-        v += ((1.0 - w) * K[k0, i] + w * K[k0 + 1, i]) * comp[i]
-    # y_ddot = N u + R (friction included in R)
-    a1, a2 = model.accelerations(P, q1, q2, q1d, q2d, 0.0)
-    r0 = a1 - dph * a2 - ddph * q2d * q2d
-    b1, b2 = model.accelerations(P, q1, q2, q1d, q2d, 1.0)
-    nn = (b1 - dph * b2 - ddph * q2d * q2d) - r0
-    u = (v - r0) / nn
-    umax = tab[T_UMAX]
-    if u > umax:
-        u = umax
-    elif u < -umax:
-        u = -umax
-    if not (u == u):
-        u = 0.0
-    return u, I, y, yd, v
-
-
-# ---------------------------------------------------------------------------- horizon solve
-@dataclass
-class HorizonSolution:
-    """Gains of the current step from one jump-Riccati solve.
-
-    Attributes:
-        steps: the transverse models of the steps in the horizon (current first).
-        theta: gain nodes of the current step [rad]; K: gains ``(n + 1, 3)``;
-        P: Lyapunov matrices ``Z^-1`` at the nodes; F: the impact jacobians used.
-        solve_time: wall time of linearisation + Riccati [s]; riccati_time: Riccati only [s].
-    """
-
-    steps: list[StepModel]
-    theta: np.ndarray
-    K: np.ndarray
-    P: np.ndarray
-    F: list[np.ndarray]
-    solve_time: float
-    riccati_time: float
-
-    def lyapunov(self, z: np.ndarray, theta: float) -> float:
-        """``V = z' Z^-1 z`` at phase ``theta`` (linear interpolation of ``Z^-1``)."""
-        th = self.theta
-        r = np.clip((theta - th[0]) / (th[1] - th[0]), 0, th.size - 1 - 1e-12)
-        k = int(r)
-        w = r - k
-        Pm = (1 - w) * self.P[k] + w * self.P[k + 1]
-        return float(z @ Pm @ z)
-
-
-def step_models(
-    P: np.ndarray, steps: list[StepPlan], terrain: Terrain | None, margin: float = 0.15
-) -> list[StepModel]:
-    """Transverse models of planned steps; the switching surface at each foothold follows the
-    ground slope there (0 without a terrain)."""
-    out = []
-    for s in steps:
-        slope = 0.0 if terrain is None else terrain.slope_at(s.foothold[0])
-        out.append(StepModel(P, s.constraint, s.thetadot_plus, slope, margin=margin))
-    return out
-
-
-def horizon_gains(models: list[StepModel], config: ControllerConfig) -> HorizonSolution:
-    """Linearise the steps and solve the jump-Riccati equation over them (current step first).
-
-    Raises:
-        ValueError: fewer than two steps or a non-controllable horizon.
-    """
-    if len(models) < 2:
-        raise ValueError("horizon_gains: need the current step and at least one more")
-    t0 = time.perf_counter()
-    n = config.grid
-    A, B, W, L = [], [], [], []
-    for m in models:
-        th = np.linspace(m.theta_plus, m.theta_minus, 2 * n + 1)
-        a, b, w = m.phase_matrices(th)
-        A.append(a)
-        B.append(b)
-        W.append(w)
-        L.append(m.theta_minus - m.theta_plus)
-    F = [impact_jacobian(models[j], models[j + 1]) for j in range(len(models) - 1)]
-    t1 = time.perf_counter()
-    sol = solve_jump_riccati(
-        A, B, L, F, np.diag(config.Q), np.array([[config.R]]), np.diag(config.Qj), w=W
-    )
-    t2 = time.perf_counter()
-    m0 = models[0]
-    theta = np.linspace(m0.theta_plus, m0.theta_minus, n + 1)
-    return HorizonSolution(models, theta, sol.K[0][:, 0, :].copy(), sol.P[0], F, t2 - t0, t2 - t1)
 
 
 # ---------------------------------------------------------------------------- diagnostics
@@ -368,10 +180,18 @@ class TransverseController:
 
     Args:
         robot: robot parameters or preset name.
-        terrain: the terrain map (a :class:`Terrain`, spec or kind name).
+        terrain: the terrain map (a :class:`Terrain`, spec or kind name); :meth:`reset` may
+            give another one for the new run.
         config: :class:`ControllerConfig` or a dict of its fields.
         planner: a :class:`GaitPlanner`, a :class:`PlannerConfig`/dict for a new one, or None
             (the robot's default planner).
+
+    Attributes:
+        records: one :class:`StepRecord` per footstep since the last reset.
+        plan: the plan being followed (None before the first one).
+        solution: the current step's :class:`HorizonSolution` (None without gains).
+        gain_table: the current step's :class:`GainTable` as the control tick reads it (None
+            without gains: zero input).
 
     Use with :func:`envs.simulate`: ``simulate(robot, terrain, q0, qd0, T, torque=ctrl)`` after
     ``ctrl.reset(q0, qd0)``; as a callable it returns the hip torque [N m] and detects impacts
@@ -397,13 +217,10 @@ class TransverseController:
         self.records: list[StepRecord] = []
         self.plan: Plan | None = None
         self.solution: HorizonSolution | None = None
+        self.gain_table: GainTable | None = None
+        self._law_args: tuple[np.ndarray, ...] = ()  # gain_table.kernel_args()
+        self._torque_gain = float(model.input_gain(self.P))  # hip torque per input unit [N m]
         self._plan_offset = 0
-        self._tab = np.zeros(N_T)
-        self._pc = np.zeros(self.planner.config.order + 1)
-        self._Fv = np.zeros(2)
-        self._Fd = np.zeros(2)
-        self._K = np.zeros((2, 3))
-        self._active = False
         self._stance = (0.0, 0.0)
         self._last_q2 = math.nan
         self._x = np.zeros(4)
@@ -415,9 +232,13 @@ class TransverseController:
         qd: np.ndarray,
         stance_foot: tuple[float, float] | None = None,
         t: float = 0.0,
+        terrain: Terrain | dict | str | None = None,
     ) -> None:
-        """Start a new run from the state ``(q, qd)`` with the stance foot at ``stance_foot``
-        (default: ``x = 0`` on the ground)."""
+        """Start a new run from the state ``(q, qd)`` [rad, rad/s] with the stance foot at
+        ``stance_foot`` [m] (default: ``x = 0`` on the ground) at time ``t`` [s], on
+        ``terrain`` (a :class:`Terrain`, spec or kind name; default: the current terrain)."""
+        if terrain is not None:
+            self.terrain = as_terrain(terrain)
         if stance_foot is None:
             stance_foot = (0.0, float(self.terrain.height(0.0)))
         self.records = []
@@ -500,14 +321,13 @@ class TransverseController:
                 sol = None
         if sol is None:
             rec.fallback = "zero input"
-            self._active = False
             self.solution = None
+            self.gain_table = None
             return
         self.solution = sol
         rec.riccati_time = sol.riccati_time
         rec.solve_time = sol.solve_time
         self._load(sol)
-        self._active = True
 
     def _fallback_steps(
         self,
@@ -554,36 +374,17 @@ class TransverseController:
         return horizon_gains(models, self.config)
 
     def _load(self, sol: HorizonSolution) -> None:
+        table = GainTable.from_solution(
+            sol, self.robot.u_max, self.config.late_blend, 4 * self.config.grid
+        )
+        self.gain_table = table
+        self._law_args = table.kernel_args()
         m0 = sol.steps[0]
         c = m0.constraint
-        order = c.order
-        # power-basis coefficients of phi in s (exact for a polynomial of this order)
-        s = 0.5 * (1 - np.cos(np.pi * np.arange(order + 1) / order))
-        self._pc = np.polynomial.polynomial.polyfit(s, c.phi(c.theta_plus + s * c.span), order)
-        ng = 4 * self.config.grid
-        a = c.theta_plus - m0.margin * c.span
-        b = c.theta_minus + m0.margin * c.span
-        thF = np.linspace(a, b, ng + 1)
-        self._Fv = np.ascontiguousarray(m0.thetadot_sq(thF))
-        self._Fd = np.ascontiguousarray(m0.dthetadot_sq(thF))
-        self._K = np.ascontiguousarray(sol.K)
-        tab = np.zeros(N_T)
-        tab[T_TP], tab[T_SPAN] = c.theta_plus, c.span
-        tab[T_F0], tab[T_FD] = a, thF[1] - thF[0]
-        tab[T_K0], tab[T_KD] = sol.theta[0], sol.theta[1] - sol.theta[0]
-        tab[T_UMAX] = self.robot.u_max
-        tab[T_B] = self.robot.kI * self.robot.ktau
-        tab[T_LATE] = self.config.late_blend
-        self._tab = tab
         rec = self.records[-1]
         rec.thetadot_nominal = (m0.thetadot_plus, math.sqrt(m0.thetadot_sq(c.theta_minus)))
 
     # ------------------------------------------------------------------ control
-    @property
-    def active(self) -> bool:
-        """Whether a transverse gain is loaded (False: zero-input fallback)."""
-        return self._active
-
     def coords(self, q: np.ndarray, qd: np.ndarray) -> np.ndarray:
         """``x_perp`` of the state relative to the current step (NaN without a plan)."""
         if self.solution is None:
@@ -596,10 +397,9 @@ class TransverseController:
         constraint continued past ``theta-`` as the feedback law does."""
         if self.solution is None:
             return np.full(3, np.nan)
-        ph, dph, _ = constraint_at(self._tab, self._pc, float(theta))
-        td = math.sqrt(
-            max(_hermite(self._tab[T_F0], self._tab[T_FD], self._Fv, self._Fd, float(theta)), 0.0)
-        )
+        tab, pc, thetadot_sq, dthetadot_sq, _ = self._law_args
+        ph, dph, _ = constraint_at(tab, pc, float(theta))
+        td = math.sqrt(max(thetadot_sq_at(tab, thetadot_sq, dthetadot_sq, float(theta)), 0.0))
         return np.array([ph, dph * td, td])
 
     def control(self, q: np.ndarray, qd: np.ndarray) -> float:
@@ -607,11 +407,11 @@ class TransverseController:
         x = self._x
         x[0], x[1], x[2], x[3] = q[0], q[1], qd[0], qd[1]
         rec = self.records[-1] if self.records else None
-        if not self._active:
+        if self.gain_table is None:
             if rec is not None:
                 rec.ticks += 1
             return 0.0
-        u, I, y, yd, _ = feedback_law(self.P, x, self._tab, self._pc, self._Fv, self._Fd, self._K)
+        u, I, y, yd, _ = feedback_law(self.P, x, *self._law_args)
         if rec is not None:
             z = np.array([I, y, yd])
             V = self.solution.lyapunov(z, x[1])
@@ -639,7 +439,7 @@ class TransverseController:
             x_new = self._stance[0] - float(fx)
             self.on_impact(q, qd, (x_new, float(self.terrain.height(x_new))), t)
         self._last_q2 = float(q[1])
-        return self.robot.kI * self.robot.ktau * self.control(q, qd)
+        return self._torque_gain * self.control(q, qd)
 
     # ------------------------------------------------------------------ closed loop
     def rollout(
@@ -649,7 +449,7 @@ class TransverseController:
         duration: float,
         dt: float = 0.005,
         steps: int | None = None,
-        sim_config: Any = None,
+        sim_config: SimConfig | None = None,
     ) -> dict[str, Any]:
         """Closed loop with the hybrid simulator, exact footholds from its impact events.
 
@@ -661,13 +461,11 @@ class TransverseController:
             dict with ``t, q, qd, u`` per tick, ``impacts`` (times), ``failure`` (None or the
             simulator's reason), ``records`` (:class:`StepRecord` list).
         """
-        from envs.simulator import Simulator
-
         sim = Simulator(self.robot, self.terrain, 1, dt=dt, config=sim_config, parallel=False)
         foot = (0.0, float(self.terrain.height(0.0)))
         sim.reset(q0, qd0, foot)
         self.reset(np.asarray(q0, float), np.asarray(qd0, float), foot)
-        b = self.robot.kI * self.robot.ktau
+        b = self._torque_gain
         ts, qs, qds, us, imps = [], [], [], [], []
         n = int(math.ceil(duration / dt - 1e-9))
         failure = None
@@ -730,12 +528,3 @@ class PDController(TransverseController):
 
     def _gains(self, models: list[StepModel]) -> HorizonSolution:
         return pd_gains(models, self.config.grid, self.kp, self.kd)
-
-
-def pd_gains(models: list[StepModel], grid: int, kp: float, kd: float) -> HorizonSolution:
-    """Constant gains ``v = -kp y - kd y_dot`` on the current step (``Z^-1 = I`` for ``V``)."""
-    m0 = models[0]
-    theta = np.linspace(m0.theta_plus, m0.theta_minus, grid + 1)
-    K = np.tile(np.array([0.0, -kp, -kd]), (grid + 1, 1))
-    P = np.tile(np.eye(3), (grid + 1, 1, 1))
-    return HorizonSolution(models, theta, K, P, [], math.nan, math.nan)

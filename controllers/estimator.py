@@ -10,7 +10,7 @@ terrain map by integrating the observer's model from the previous estimate
 (:func:`controllers.observer.predict_touchdown`); the impact map is applied to the estimate
 there and the stance foot moves to the located foothold (dead reckoning on the map).
 
-The reference policy (:mod:`controllers.policy`) and the RL observation wrapper
+The reference policy (:mod:`controllers.reference`) and the RL observation wrapper
 (``agents.wrappers.EstimatedStateObservation``) share it, so learned and classical controllers
 see the same estimate.
 """
@@ -25,11 +25,23 @@ import numpy as np
 
 from envs.terrain import Terrain
 
-from .observer import HighGainObserver, observer_impact, observer_update, predict_touchdown
+from .observer import (
+    HighGainObserver,
+    observer_impact,
+    observer_update,
+    predict_touchdown,
+    substeps_for,
+)
 
-__all__ = ["SensorStateEstimator"]
+__all__ = ["IMPACT", "START", "TICK", "SensorStateEstimator"]
 
+#: what :meth:`SensorStateEstimator.update` reports about a tick
 START, TICK, IMPACT = "start", "tick", "impact"
+
+#: a crossing of the ground counts as a touchdown once the full-length swing foot is this far
+#: ahead of the stance foot, fraction of the leg length ``l`` (the simulator's and the
+#: planner's default ``arm_distance``)
+ARM_DISTANCE = 0.1
 
 
 class SensorStateEstimator:
@@ -95,6 +107,7 @@ class SensorStateEstimator:
 
     @property
     def x(self) -> np.ndarray:
+        """The estimate ``[q1, q2, q1d, q2d]`` [rad, rad/s] (the observer's, updated in place)."""
         return self.observer.x
 
     def decode(self, obs: Any) -> tuple[np.ndarray, int]:
@@ -106,9 +119,10 @@ class SensorStateEstimator:
         o = np.asarray(obs, dtype=np.float64)
         if o.shape != (self.layout.size,) or not np.all(np.isfinite(o)):
             raise ValueError(f"observation must be {self.layout.size} finite numbers")
-        ca, cb = o[2] > 0.5, o[3] > 0.5
+        lay = self.layout
+        ca, cb = o[lay.contact_a] > 0.5, o[lay.contact_b] > 0.5
         leg = 0 if (ca and not cb) else 1 if (cb and not ca) else self.stance_leg
-        hip, leg_a = o[0], o[1]
+        hip, leg_a = o[lay.hip], o[lay.leg_a]
         if leg == 1:
             return np.array([-hip, leg_a - hip]), 1
         return np.array([hip, leg_a]), 0
@@ -158,7 +172,7 @@ class SensorStateEstimator:
             xs,
             ys,
             2 * self._nsub_td,
-            0.1 * self.robot.l,
+            ARM_DISTANCE * self.robot.l,
         )
         if not found:  # take the state at the end of the period as the pre-impact state
             _, tau, xpre, fx = predict_touchdown(
@@ -183,7 +197,7 @@ class SensorStateEstimator:
         rest = self.dt - min(tau, self.dt)
         if rest > 1e-9:
             # the measurement goes from the mapped estimate to the new sample
-            nsub = max(1, math.ceil(rest / (0.25 * self.observer.eps)))
+            nsub = substeps_for(rest, self.observer.eps)
             observer_update(
                 self.P, x, x[0], x[1], q_meas[0], q_meas[1], u, rest, self.observer.eps, nsub
             )

@@ -157,6 +157,10 @@ class HighGainObserver:
         robot: robot parameters (the model copy inside the observer).
         dt: control period [s], > 0: the interval of each :meth:`update`.
         eps: observer time constant [s], > 0 (paper: 0.02); error eigenvalues at ``-1/eps``.
+
+    Attributes:
+        x: the estimate ``[q1, q2, q1d, q2d]`` [rad, rad/s], updated in place.
+        q_last: the last measured angles [rad], where the next update's interpolation starts.
     """
 
     def __init__(self, robot: RobotParams, dt: float, eps: float = 0.02):
@@ -203,11 +207,3 @@ class HighGainObserver:
         q1, q2 = self.q_last
         self.q_last = np.array([-q1, q2 - q1])
         return self.x
-
-    @property
-    def q(self) -> np.ndarray:
-        return self.x[:2]
-
-    @property
-    def qd(self) -> np.ndarray:
-        return self.x[2:]

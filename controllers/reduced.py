@@ -39,6 +39,7 @@ __all__ = [
     "impact_along_constraint",
     "nominal_accelerations",
     "nominal_input",
+    "output_acceleration",
     "pfl_terms",
     "phase_grid",
     "reduced_coefficients",
@@ -209,6 +210,24 @@ def impact_along_constraint(
 
 
 @_jit
+def output_acceleration(
+    P: np.ndarray,
+    q1: np.ndarray | float,
+    q2: np.ndarray | float,
+    q1d: np.ndarray | float,
+    q2d: np.ndarray | float,
+    u: float,
+    dphi: np.ndarray | float,
+    ddphi: np.ndarray | float,
+) -> np.ndarray | float:
+    """``y_ddot`` [rad/s^2] of the output ``y = q1 - phi(q2)`` under the input ``u`` [input
+    units]: ``q1dd - phi' q2dd - phi'' q2d^2`` (hip friction included); ``dphi, ddphi`` are
+    ``phi', phi''`` evaluated at ``theta = q2``."""
+    q1dd, q2dd = model.accelerations(P, q1, q2, q1d, q2d, u)
+    return q1dd - dphi * q2dd - ddphi * q2d * q2d
+
+
+@_jit
 def pfl_terms(
     P: np.ndarray,
     q1: np.ndarray | float,
@@ -222,10 +241,11 @@ def pfl_terms(
 
     ``u`` is in input units (hip torque ``kI ktau u``); ``R`` includes the hip friction at the
     given ``q1d``. ``dphi, ddphi`` are ``phi', phi''`` evaluated at ``theta = q2``. The input that
-    gives ``y_ddot = v`` is ``u = (v - R) / N``.
+    gives ``y_ddot = v`` is ``u = (v - R) / N``. ``N`` is written in closed form here; the
+    control tick (:func:`controllers.feedback.feedback_law`) takes it as the response of
+    :func:`output_acceleration` to a unit input, equal up to rounding.
     """
-    q1dd0, q2dd0 = model.accelerations(P, q1, q2, q1d, q2d, 0.0)
-    r = q1dd0 - dphi * q2dd0 - ddphi * q2d * q2d
+    r = output_acceleration(P, q1, q2, q1d, q2d, 0.0, dphi, ddphi)
     m11, m12, m22 = model.mass_matrix(P, q1)
     det = m11 * m22 - m12 * m12
     # response of qdd to a unit input: M^-1 [b, 0]

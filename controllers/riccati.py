@@ -10,7 +10,8 @@ constraint ``z(end) = 0``. The independent variable ``s`` is time in the paper; 
 controller uses the phase variable ``theta`` instead (then ``A, B`` are divided by the nominal
 ``theta_dot`` and ``w = 1/theta_dot``), which is why the weight ``w`` exists.
 
-The equation is solved in inverse form ``Z = P^-1`` (control notes, section 5), backwards::
+The equation is solved in inverse form, for ``Z`` the inverse of the usual Riccati matrix
+(control notes, section 5), backwards::
 
     -dZ/ds = -Z A' - A Z + B (w R)^-1 B' - w Z Q Z,     Z(end) = 0,
     Z(jump_j -) = Q_j^-1 - Q_j^-1 F_j' (Z(jump_j +) + F_j Q_j^-1 F_j')^-1 F_j Q_j^-1,
@@ -146,17 +147,17 @@ def _prepare(B, w, R_inv, Q):
 
 @_jit
 def _gains(Znodes, Bn, wn, R_inv):
-    """``K = -R^-1 B' Z^-1 / w`` and ``P = Z^-1`` at the nodes (``B`` and ``w`` at the nodes)."""
+    """``K = -R^-1 B' Z^-1 / w`` and ``Z^-1`` at the nodes (``B`` and ``w`` at the nodes)."""
     N = Znodes.shape[0]
     n = Znodes.shape[1]
     m = Bn.shape[2]
     K = np.empty((N, m, n))
-    P = np.empty((N, n, n))
+    Zinv = np.empty((N, n, n))
     for i in range(N):
-        Pi = _spd_inverse(Znodes[i])
-        P[i] = Pi
-        K[i] = -(R_inv @ Bn[i].T @ Pi) / wn[i]
-    return K, P
+        Zi = _spd_inverse(Znodes[i])
+        Zinv[i] = Zi
+        K[i] = -(R_inv @ Bn[i].T @ Zi) / wn[i]
+    return K, Zinv
 
 
 @dataclass
@@ -168,13 +169,13 @@ class RiccatiSolution:
         Z: per segment, ``Z`` at the nodes, shape ``(n_j + 1, n, n)``.
         K: gains ``v = K z`` at the nodes of the first ``gain_segments`` segments,
             shape ``(n_j + 1, m, n)`` each.
-        P: ``Z^-1`` (the Lyapunov matrix of ``V = z' P z``) where ``K`` is given.
+        Zinv: ``Z^-1`` (the Lyapunov matrix of ``V = z' Z^-1 z``) where ``K`` is given.
     """
 
     s: list[np.ndarray]
     Z: list[np.ndarray]
     K: list[np.ndarray]
-    P: list[np.ndarray]
+    Zinv: list[np.ndarray]
 
 
 def solve_jump_riccati(
@@ -255,7 +256,7 @@ def solve_jump_riccati(
     G, Qw = _prepare(Ball, wall, R_inv, Q)
     Znodes = np.empty((int(np.sum(nsteps + 1)), n, n))
     _solve_segments(Aall, G, Qw, ds, nsteps, offs, Fall, Qj_inv, Znodes, node_offs)
-    s_list, Z_list, K_list, P_list = [], [], [], []
+    s_list, Z_list, K_list, Zinv_list = [], [], [], []
     start = float(s0)
     for j in range(S):
         nj = int(nsteps[j])
@@ -266,12 +267,14 @@ def solve_jump_riccati(
             Bn = Ball[offs[j] : offs[j] + 2 * nj + 1 : 2]
             wn = wall[offs[j] : offs[j] + 2 * nj + 1 : 2]
             try:
-                K, P = _gains(np.ascontiguousarray(Z_list[j]), np.ascontiguousarray(Bn), wn, R_inv)
+                K, Zinv = _gains(
+                    np.ascontiguousarray(Z_list[j]), np.ascontiguousarray(Bn), wn, R_inv
+                )
             except np.linalg.LinAlgError:
                 raise ValueError(
                     f"solve_jump_riccati: Z is not positive definite on segment {j}; the system "
                     "is not controllable over the remaining horizon (lengthen the horizon)"
                 ) from None
             K_list.append(K)
-            P_list.append(P)
-    return RiccatiSolution(s_list, Z_list, K_list, P_list)
+            Zinv_list.append(Zinv)
+    return RiccatiSolution(s_list, Z_list, K_list, Zinv_list)

@@ -93,18 +93,18 @@ class StepModel:
             # F(theta) = psi(theta, a) Fa + Gam(theta, a), with Fa fixed by F(theta_plus)
             psi_s, gam_s = ChebyshevSeries(psi, a, b), ChebyshevSeries(gam, a, b)
             fa = (self.thetadot_plus**2 - gam_s(c.theta_plus)) / psi_s(c.theta_plus)
-            Fv = psi * fa + gam
-            if np.all(Fv > 0):
+            F_nodes = psi * fa + gam
+            if np.all(F_nodes > 0):
                 break
         if not np.all(sign * al > 1e-12):
             raise ValueError("StepModel: alpha(theta) vanishes on the step (singular constraint)")
-        if np.any(Fv <= 0):
+        if np.any(F_nodes <= 0):
             raise ValueError(
                 "StepModel: the nominal theta_dot^2 is not positive over the step "
-                f"(min {Fv.min():.3g} rad^2/s^2): the walker would stall"
+                f"(min {F_nodes.min():.3g} rad^2/s^2): the walker would stall"
             )
         self.margin = margin
-        self._F = ChebyshevSeries(Fv, a, b)
+        self._F = ChebyshevSeries(F_nodes, a, b)
 
     # ------------------------------------------------------------------ nominal motion
     def derivatives(self, theta: np.ndarray | float) -> tuple[np.ndarray, ...]:
@@ -125,10 +125,12 @@ class StepModel:
 
     @property
     def theta_plus(self) -> float:
+        """Phase at the start of the step [rad]."""
         return self.constraint.theta_plus
 
     @property
     def theta_minus(self) -> float:
+        """Phase at the planned impact [rad]."""
         return self.constraint.theta_minus
 
     def thetadot_sq(self, theta: np.ndarray | float) -> np.ndarray | float:

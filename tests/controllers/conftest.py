@@ -29,3 +29,16 @@ def flat_chain(robot="paper", th0=0.2, nsteps=3, td_plus=1.3, slope_minus=1.6, o
 @pytest.fixture(scope="session")
 def chain():
     return flat_chain()
+
+
+@pytest.fixture(scope="session")
+def state_from_z():
+    """``f(step, theta, z)``: the state at phase ``theta`` whose transverse coordinates relative
+    to ``step`` are ``z = [I, y, y_dot]``."""
+
+    def f(step, theta, z):
+        c = step.constraint
+        td = np.sqrt(step.thetadot_sq(theta) + z[0])
+        return np.array([c.phi(theta) + z[1], theta, c.dphi(theta) * td + z[2], td])
+
+    return f

@@ -5,12 +5,8 @@ import math
 import numpy as np
 import pytest
 
-from controllers.controller import (
-    ControllerConfig,
-    PDController,
-    TransverseController,
-    feedback_law,
-)
+from controllers.controller import ControllerConfig, PDController, TransverseController
+from envs import model, simulate
 from envs.simulator import Simulator
 from envs.terrain import Terrain
 
@@ -51,7 +47,7 @@ def closed_loop(cls, terrain, z0, steps, replan=False, robot="paper", end=None, 
     np.testing.assert_allclose(ctrl.coords(x0[:2], x0[2:]), z0, atol=1e-9)
     sim = Simulator(ctrl.robot, ctrl.terrain, 1, dt=DT)
     sim.reset(x0[:2], x0[2:])
-    b = ctrl.robot.kI * ctrl.robot.ktau
+    b = model.input_gain(ctrl.P)  # hip torque per input unit [N m]
     while len(ctrl.records) <= steps:
         u = ctrl.control(sim.q[0].copy(), sim.qd[0].copy())
         ev = sim.step(b * u)
@@ -171,28 +167,18 @@ def test_classic_walker_climbs_stairs_from_perturbed_starts():
         assert min(r.thetadot_start for r in recs) > 0.5  # never near a stall
 
 
-def test_feedback_law_matches_partial_feedback_linearisation():
-    """The compiled tick: y_ddot = v through the model, and the actuator limit."""
-    from controllers.reduced import pfl_terms
-    from envs import model
-
-    ctrl = TransverseController("paper", "flat", ControllerConfig(replan=False))
-    gait = ctrl.planner.periodic_gait()
-    ctrl.reset(gait.q, gait.qd)
-    st = ctrl.solution.steps[0]
-    th = 0.3 * st.theta_plus + 0.7 * st.theta_minus
-    x = state_from_z(st, th, np.array([0.01, 0.002, -0.03]))
-    u, I, y, yd, v = feedback_law(ctrl.P, x, ctrl._tab, ctrl._pc, ctrl._Fv, ctrl._Fd, ctrl._K)
-    np.testing.assert_allclose([I, y, yd], [0.01, 0.002, -0.03], atol=1e-7)
-    c = st.constraint
-    n, r = pfl_terms(ctrl.P, *x, c.dphi(th), c.ddphi(th))
-    np.testing.assert_allclose(n * u + r, v, rtol=1e-9, atol=1e-9)
-    a1, a2 = model.accelerations(ctrl.P, *x, u)
-    ydd = a1 - c.dphi(th) * a2 - c.ddphi(th) * x[3] ** 2
-    np.testing.assert_allclose(ydd, v, rtol=1e-8, atol=1e-8)
-    # a huge gain saturates at the actuator limit (and never returns NaN)
-    ub = feedback_law(ctrl.P, x, ctrl._tab, ctrl._pc, ctrl._Fv, ctrl._Fd, 1e6 * ctrl._K)[0]
-    assert abs(ub) == ctrl.robot.u_max
+def test_terrain_given_at_reset_replaces_the_one_given_at_construction():
+    stairs = TERRAINS["stairs_up"]
+    built = TransverseController("paper", stairs, ControllerConfig(replan=False, plan_steps=4))
+    moved = TransverseController("paper", "flat", ControllerConfig(replan=False, plan_steps=4))
+    gait = built.planner.periodic_gait()
+    built.reset(gait.q, gait.qd)
+    moved.reset(gait.q, gait.qd, terrain=stairs)
+    assert moved.terrain is stairs
+    for a, b in zip(built.plan.steps, moved.plan.steps, strict=True):
+        np.testing.assert_array_equal(a.constraint.coeffs, b.constraint.coeffs)
+        assert a.foothold == b.foothold
+    np.testing.assert_array_equal(built.gain_table.gains, moved.gain_table.gains)
 
 
 def test_config_validation():
@@ -225,8 +211,6 @@ def test_value_of_feedback_on_the_paper_stairs():
 
 def test_usable_as_torque_callable_of_simulate():
     """envs.simulate(..., torque=controller): impacts detected from the state, replanning."""
-    from envs import simulate
-
     ctrl = TransverseController("paper", "flat")
     gait = ctrl.planner.periodic_gait()
     ctrl.reset(gait.q, gait.qd)

@@ -35,7 +35,7 @@ def _samples(nsteps):
 
 
 def _reference(F, Q, R, Qj):
-    """P-free reference: Z-equation by DOP853 at tight tolerance, jumps in the plain form."""
+    """Reference in Z alone: Z-equation by DOP853 at tight tolerance, jumps in the plain form."""
     ends = np.cumsum(LENGTHS)
     starts = ends - np.array(LENGTHS)
     Z = np.zeros((3, 3))
@@ -85,10 +85,10 @@ def test_gain_and_lyapunov_matrix(problem):
     sol = solve_jump_riccati(A, B, LENGTHS, F, Q, R, Qj, w=W, gain_segments=2)
     for j in range(2):
         for k in range(0, 21, 5):
-            Z, P = sol.Z[j][k], sol.P[j][k]
-            np.testing.assert_allclose(P @ Z, np.eye(3), atol=1e-9)
+            Z, Zinv = sol.Z[j][k], sol.Zinv[j][k]
+            np.testing.assert_allclose(Zinv @ Z, np.eye(3), atol=1e-9)
             Bk, wk = B[j][2 * k], W[j][2 * k]
-            np.testing.assert_allclose(sol.K[j][k], -np.linalg.solve(wk * R, Bk.T) @ P)
+            np.testing.assert_allclose(sol.K[j][k], -np.linalg.solve(wk * R, Bk.T) @ Zinv)
             assert np.all(np.linalg.eigvalsh(Z) > 0)
 
 

@@ -4,17 +4,13 @@ import numpy as np
 import pytest
 from scipy.integrate import solve_ivp
 
+from controllers.bezier import BezierConstraint
 from controllers.reduced import pfl_terms
-from controllers.transverse import impact_jacobian, impact_jacobian_fd, surface_state
+from controllers.transverse import StepModel, impact_jacobian, impact_jacobian_fd, surface_state
 from envs import model
+from envs.params import RobotParams
 
 K0 = np.array([0.5, -30.0, -9.0])  # some fixed feedback v = K0 x_perp for the closed loop
-
-
-def _state_from_z(step, theta, z):
-    c = step.constraint
-    td = np.sqrt(step.thetadot_sq(theta) + z[0])
-    return np.array([c.phi(theta) + z[1], theta, c.dphi(theta) * td + z[2], td])
 
 
 def _nonlinear(P, step, theta_a, theta_b, x0):
@@ -42,14 +38,14 @@ def _linear(step, theta_a, theta_b, z0):
 
 
 @pytest.mark.parametrize("direction", [(1.0, 0.0, 0.0), (0.0, 1.0, 0.0), (0.3, -0.5, 2.0)])
-def test_continuous_linearization_error_is_quadratic(chain, direction):
+def test_continuous_linearization_error_is_quadratic(chain, state_from_z, direction):
     P, steps = chain
     st = steps[0]
     ta, tb = st.theta_plus, st.theta_minus
     d = np.array(direction) / np.linalg.norm(direction)
     errs = []
     for eps in (4e-3, 2e-3, 1e-3):
-        x0 = _state_from_z(st, ta, eps * d)
+        x0 = state_from_z(st, ta, eps * d)
         np.testing.assert_allclose(st.coords(x0), eps * d, atol=1e-12)
         z_nl = st.coords(_nonlinear(P, st, ta, tb, x0))
         z_lin = _linear(st, ta, tb, eps * d)
@@ -83,7 +79,7 @@ def test_impact_jacobian_closed_form_matches_finite_differences(chain):
         assert np.abs(z1).max() < 1e-10
 
 
-def test_impact_jacobian_matches_flow_impact_flow(chain):
+def test_impact_jacobian_matches_flow_impact_flow(chain, state_from_z):
     """F_j inside the full nonlinear flow -> impact -> flow map between two phase sections."""
     P, steps = chain
     s0, s1 = steps[0], steps[1]
@@ -91,7 +87,7 @@ def test_impact_jacobian_matches_flow_impact_flow(chain):
     tb = s1.theta_plus + 0.03
 
     def flow_map(z):
-        x = _state_from_z(s0, ta, z)
+        x = state_from_z(s0, ta, z)
 
         def f(th, x):
             q1, q2, q1d, q2d = x
@@ -144,10 +140,6 @@ def test_margin_shrinks_where_the_continued_constraint_is_singular():
     """A step onto a 1 cm rise replanned in closed loop (classic walker): its order-6
     constraint continued 15 % past theta- makes alpha change sign; the extension shrinks
     instead of the step being rejected, and the profile on the step is unchanged."""
-    from controllers.bezier import BezierConstraint
-    from controllers.transverse import StepModel
-    from envs.params import RobotParams
-
     P = RobotParams.from_preset("classic").vector()
     a = [-0.29102594500881324, -0.2640678151438681, 0.0928026563809734, 1.3565597272147574]
     a += [0.13804921681533533, 0.30097754751602745, 0.273031028035243]

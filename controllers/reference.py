@@ -1,0 +1,193 @@
+"""Reference policy for the Gymnasium environments: observer + planner + transverse controller.
+
+The policy sees what the paper's controller sees: the sensor observation (two encoders, two
+contact switches; the terrain scan is not needed) plus what the environment tells a controller
+about the world and the robot (``env.unwrapped``: ``robot``, ``terrain``, ``dt``, ``u_max``,
+``sensor_layout``). It never reads the true state.
+
+Every tick the state estimator (:class:`controllers.estimator.SensorStateEstimator`: encoders
+and contact switches decoded into ``q`` and the stance leg, the high-gain observer, touchdowns
+located on the terrain map) updates the estimate with the input applied over the last period,
+and the controller's input is applied to the estimate. At every located touchdown the
+controller replans from the mapped estimate. Shortly after the start, once the observer has
+converged (``settle_time``), the current step is replanned from the estimate.
+
+Safe behaviour: if planning fails, the controller shortens its look-ahead (down to a single
+planned step held with PD on ``y``), keeps the previous plan, or, with nothing left, applies
+zero input (:mod:`controllers.controller`); if anything else fails inside a tick (a non-finite
+estimate, say), the policy applies zero input for the rest of the episode. Both are recorded in
+:attr:`ReferencePolicy.diagnostics` (``"fallbacks"``: ``(kind, time, reason)``). A call never
+raises because of the robot's state.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import gymnasium as gym
+import numpy as np
+
+from .controller import ControllerConfig, PDController, TransverseController
+from .estimator import IMPACT, START, SensorStateEstimator
+from .planner import GaitPlanner, PlannerConfig
+
+__all__ = ["PDPolicy", "ReferencePolicy", "make_reference_policy"]
+
+
+class ReferencePolicy:
+    """Sensor-based walking policy: ``action = policy(observation)``.
+
+    Args:
+        env: the environment (as ``gym.make`` returns it; wrappers are looked through).
+        config: :class:`ControllerConfig` or dict (default: replan at every footstep, h = 3).
+        planner: :class:`GaitPlanner`, :class:`PlannerConfig`, dict or None (robot default).
+        eps: observer time constant [s] (paper: 0.02).
+        settle_time: time after the start at which the current step is replanned from the
+            observer's estimate [s].
+        initial_velocity: velocity guess ``(q1d, q2d)`` [rad/s] for the observer at the start;
+            default: the environment's nominal start velocity (its configuration, not the
+            episode's true state), else zero.
+        record_history: keep per-tick ``t, q_meas, x_hat, u, stance_leg, nominal`` in
+            :attr:`history` (nominal: ``q1, q1d, q2d`` of the current step at the estimated
+            phase).
+        controller_kwargs: passed to the controller class (``kp``, ``kd`` for :class:`PDPolicy`).
+    """
+
+    controller_class = TransverseController
+
+    def __init__(
+        self,
+        env: gym.Env,
+        config: ControllerConfig | dict | None = None,
+        planner: GaitPlanner | PlannerConfig | dict | None = None,
+        eps: float = 0.02,
+        settle_time: float = 0.1,
+        initial_velocity: tuple[float, float] | None = None,
+        record_history: bool = False,
+        **controller_kwargs: Any,
+    ):
+        est = self.estimator = SensorStateEstimator(env, eps, initial_velocity)
+        self.robot, self.u_max = est.robot, est.u_max
+        if config is None:
+            config = ControllerConfig()
+        # the episode's course is known at its first tick: the controller gets it at reset
+        self.controller = self.controller_class(
+            self.robot, est.terrain, config, planner, **controller_kwargs
+        )
+        self.initial_velocity = est.initial_velocity
+        self.settle_time = float(settle_time)
+        self.record_history = bool(record_history)
+        self.reset()
+
+    # ------------------------------------------------------------------ episode
+    def reset(self) -> None:
+        """Forget the episode (call after ``env.reset``); the next call starts a new one."""
+        self.estimator.reset()
+        self._u = 0.0
+        self._settled = False
+        self._dead = False
+        self.diagnostics: dict[str, Any] = {
+            "footsteps": 0,
+            "fallbacks": [],
+            "touchdowns_located": 0,
+            "touchdowns_guessed": 0,
+            "error": None,
+        }
+        self.history: dict[str, list] = {
+            "t": [],
+            "q_meas": [],
+            "x_hat": [],
+            "u": [],
+            "stance_leg": [],
+            "nominal": [],
+        }
+
+    @property
+    def stance_foot(self) -> tuple[float, float]:
+        """Estimated stance-foot position ``(x, y)`` [m]."""
+        return self.estimator.stance_foot
+
+    @property
+    def terrain(self) -> Any:
+        """The terrain map of the episode (the env's course)."""
+        return self.estimator.terrain
+
+    def applied(self, action: Any) -> None:
+        """Tell the policy the action actually applied over the current period, when it differs
+        from the one it returned (a residual added to it, say): the observer integrates the
+        model with the applied input."""
+        a = float(np.clip(np.asarray(action, dtype=np.float64).reshape(-1)[0], -1.0, 1.0))
+        if not np.isfinite(a):
+            raise ValueError(f"applied action must be finite, got {action!r}")
+        self._u = a * self.u_max
+
+    @property
+    def records(self) -> list:
+        """The controller's per-footstep :class:`StepRecord` list."""
+        return self.controller.records
+
+    def __call__(self, obs: np.ndarray) -> np.ndarray:
+        """Action (float32, shape (1,)) for one sensor observation."""
+        q, leg = self.estimator.decode(obs)
+        if self._dead:
+            return np.zeros(1, dtype=np.float32)
+        try:
+            u = self._tick(q, leg)
+        except Exception as exc:  # never crash a rollout: record and go limp
+            self._dead = True
+            self.diagnostics["error"] = f"{type(exc).__name__}: {exc}"
+            self.diagnostics["fallbacks"].append(("zero input", self.estimator.t, str(exc)))
+            u = 0.0
+        a = max(-1.0, min(1.0, u / self.u_max))
+        self._u = a * self.u_max  # the input applied unless `applied` says otherwise
+        return np.array([a], dtype=np.float32)
+
+    def _tick(self, q: np.ndarray, leg: int) -> float:
+        est = self.estimator
+        event = est.update(q, leg, self._u)
+        x = est.x
+        if event == START:
+            self.controller.reset(
+                x[:2].copy(),
+                self.initial_velocity.copy(),
+                est.stance_foot,
+                t=0.0,
+                terrain=est.terrain,
+            )
+        if event == IMPACT:
+            self.diagnostics["footsteps"] += 1
+            self.diagnostics["touchdowns_located"] = est.touchdowns_located
+            self.diagnostics["touchdowns_guessed"] = est.touchdowns_guessed
+            self.controller.on_impact(x[:2].copy(), x[2:].copy(), est.stance_foot, t=est.t)
+            self._note_fallback()
+        if event != START and not self._settled and est.t >= self.settle_time - 1e-12:
+            self._settled = True
+            self.controller.replan(x[:2].copy(), x[2:].copy())
+            self._note_fallback()
+        u = self.controller.control(x[:2], x[2:])
+        if self.record_history:
+            h = self.history
+            h["t"].append(est.t)
+            h["q_meas"].append(q.copy())
+            h["x_hat"].append(x.copy())
+            h["u"].append(u)
+            h["stance_leg"].append(est.stance_leg)
+            h["nominal"].append(self.controller.nominal(x[1]))
+        return u
+
+    def _note_fallback(self) -> None:
+        rec = self.controller.records[-1] if self.controller.records else None
+        if rec is not None and rec.fallback is not None:
+            self.diagnostics["fallbacks"].append((rec.fallback, self.estimator.t, rec.reason))
+
+
+class PDPolicy(ReferencePolicy):
+    """The reference policy with the transverse feedback replaced by plain PD on ``y``
+    (:class:`controllers.controller.PDController`; keyword arguments ``kp``, ``kd``)."""
+
+    controller_class = PDController
+
+
+def make_reference_policy(env: gym.Env, **kwargs: Any) -> ReferencePolicy:
+    """The reference policy for ``env`` (see :class:`ReferencePolicy` for the options)."""
+    return ReferencePolicy(env, **kwargs)

@@ -1,0 +1,64 @@
+"""The compiled control tick: partial feedback linearisation, actuator limit, constraint."""
+
+import dataclasses
+
+import numpy as np
+import pytest
+
+from controllers.controller import ControllerConfig, TransverseController
+from controllers.feedback import constraint_at, feedback_law, thetadot_sq_at
+from controllers.reduced import pfl_terms
+from envs import model
+
+
+@pytest.fixture(scope="module")
+def loaded():
+    """A controller with the paper robot's periodic gait loaded (fixed plan)."""
+    ctrl = TransverseController("paper", "flat", ControllerConfig(replan=False))
+    gait = ctrl.planner.periodic_gait()
+    ctrl.reset(gait.q, gait.qd)
+    return ctrl
+
+
+def test_feedback_law_matches_partial_feedback_linearisation(loaded, state_from_z):
+    """The compiled tick: y_ddot = v through the model, and the actuator limit."""
+    ctrl = loaded
+    st = ctrl.solution.steps[0]
+    th = 0.3 * st.theta_plus + 0.7 * st.theta_minus
+    x = state_from_z(st, th, np.array([0.01, 0.002, -0.03]))
+    u, I, y, yd, v = feedback_law(ctrl.P, x, *ctrl.gain_table.kernel_args())
+    np.testing.assert_allclose([I, y, yd], [0.01, 0.002, -0.03], atol=1e-7)
+    c = st.constraint
+    n, r = pfl_terms(ctrl.P, *x, c.dphi(th), c.ddphi(th))
+    np.testing.assert_allclose(n * u + r, v, rtol=1e-9, atol=1e-9)
+    a1, a2 = model.accelerations(ctrl.P, *x, u)
+    ydd = a1 - c.dphi(th) * a2 - c.ddphi(th) * x[3] ** 2
+    np.testing.assert_allclose(ydd, v, rtol=1e-8, atol=1e-8)
+    # a huge gain saturates at the actuator limit (and never returns NaN)
+    table = dataclasses.replace(ctrl.gain_table, gains=1e6 * ctrl.gain_table.gains)
+    ub = feedback_law(ctrl.P, x, *table.kernel_args())[0]
+    assert abs(ub) == ctrl.robot.u_max
+
+
+def test_constraint_and_speed_match_the_step_model_inside_the_step(loaded):
+    ctrl = loaded
+    st = ctrl.solution.steps[0]
+    tab, pc, f, df, _ = ctrl.gain_table.kernel_args()
+    for th in np.linspace(st.theta_plus, st.theta_minus, 7):
+        np.testing.assert_allclose(constraint_at(tab, pc, th), st.derivatives(th), atol=1e-9)
+        assert thetadot_sq_at(tab, f, df, th) == pytest.approx(st.thetadot_sq(th), rel=1e-6)
+
+
+def test_late_touchdown_blends_the_slope_to_zero(loaded):
+    """Past theta- the constraint keeps its value and slope continuous and stops opening the
+    legs after late_blend rad."""
+    ctrl = loaded
+    g = ctrl.gain_table
+    tab, pc = g.scalars, g.phi_coeffs
+    end = g.theta_plus + g.span
+    ph0, dph0, _ = constraint_at(tab, pc, end)
+    ph, dph, _ = constraint_at(tab, pc, end + 1e-9)
+    assert ph == pytest.approx(ph0, abs=1e-8) and dph == pytest.approx(dph0, rel=1e-6)
+    ph, dph, ddph = constraint_at(tab, pc, end + 2 * g.late_blend)
+    assert dph == 0.0 and ddph == 0.0
+    assert ph == pytest.approx(ph0 + 0.5 * dph0 * g.late_blend, rel=1e-12)
