@@ -5,10 +5,18 @@ transverse linearization, jump-Riccati receding-horizon control, observer, refer
 # observer and reference policy
 from .bezier import BezierConstraint, bernstein_basis, bezier
 from .controller import ControllerConfig, PDController, TransverseController
-from .footsteps import FootholdRules, TerrainMap
 from .gains import GainTable
 from .observer import HighGainObserver
-from .planner import GaitPlanner, PeriodicGait, Plan, PlannerConfig, PlanningError, StepPlan
+from .planner import (
+    FootholdRules,
+    GaitPlanner,
+    PeriodicGait,
+    Plan,
+    PlannerConfig,
+    PlanningError,
+    StepPlan,
+    TerrainMap,
+)
 from .reference import PDPolicy, ReferencePolicy, make_reference_policy
 from .riccati import solve_jump_riccati
 

@@ -34,11 +34,11 @@ from typing import Any
 import numpy as np
 import yaml
 
-from envs import model
 from envs.config_util import dataclass_from_mapping
-from envs.params import RobotParams, as_params
-from envs.simulator import SimConfig, Simulator
-from envs.terrain import Terrain, as_terrain
+from envs.physics import model
+from envs.physics.params import RobotParams, as_params
+from envs.physics.simulator import SimConfig, Simulator
+from envs.physics.terrain import Terrain, as_terrain
 
 from .feedback import constraint_at, feedback_law, thetadot_sq_at
 from .gains import GainTable, HorizonSolution, horizon_gains, pd_gains, step_models
@@ -455,7 +455,7 @@ class TransverseController:
 
         Args:
             q0, qd0: start state; duration: simulated time [s]; dt: control period [s];
-            steps: stop after this many footsteps; sim_config: :class:`envs.simulator.SimConfig`.
+            steps: stop after this many footsteps; sim_config: :class:`envs.physics.simulator.SimConfig`.
 
         Returns:
             dict with ``t, q, qd, u`` per tick, ``impacts`` (times), ``failure`` (None or the

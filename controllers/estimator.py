@@ -23,7 +23,7 @@ from typing import Any
 import gymnasium as gym
 import numpy as np
 
-from envs.terrain import Terrain
+from envs.physics.terrain import Terrain
 
 from .observer import (
     HighGainObserver,

@@ -22,7 +22,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from envs.terrain import Terrain
+from envs.physics.terrain import Terrain
 
 from .feedback import pack_scalars
 from .riccati import solve_jump_riccati

@@ -20,9 +20,9 @@ import math
 import numpy as np
 from numba import njit
 
-from envs import model
-from envs.params import RobotParams
-from envs.terrain import terrain_height
+from envs.physics import model
+from envs.physics.params import RobotParams
+from envs.physics.terrain import terrain_height
 
 _jit = njit(cache=True, error_model="numpy")
 

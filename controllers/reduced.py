@@ -6,14 +6,14 @@ equations of motion restricted to the constraint reads (control notes, section 2
     alpha(theta) theta_ddot + beta(theta) theta_dot^2 + gamma(theta) = 0,
 
 with ``alpha = M21 phi' + M22``, ``beta theta_dot^2 = M21 phi'' theta_dot^2 + [C(q, qd) qd]_2`` at
-``qd = [phi', 1] theta_dot`` (the Christoffel terms, taken from :func:`envs.model.coriolis`, which
+``qd = [phi', 1] theta_dot`` (the Christoffel terms, taken from :func:`envs.physics.model.coriolis`, which
 is quadratic in ``qd``) and ``gamma = G2``. Its integral is
 
     theta_dot^2 = psi(theta, theta0) theta_dot0^2 + Gam(theta, theta0).
 
 Integrals are computed on a Chebyshev-Lobatto grid over the step (spectrally accurate for the
 smooth integrands of a Bezier constraint): :func:`phase_grid` makes the grid, and every function
-here is vectorised over it. All model quantities come from :mod:`envs.model`; ``P`` is
+here is vectorised over it. All model quantities come from :mod:`envs.physics.model`; ``P`` is
 ``RobotParams.vector()``.
 """
 
@@ -25,10 +25,10 @@ import numpy as np
 from numba import njit
 from numpy.polynomial import chebyshev as cheb
 
-from envs import model
+from envs.physics import model
 
 # entry-wise functions are compiled like envs.model's: the same code serves numpy arrays (a grid
-# of phases) and scalars inside compiled loops (controllers.step_kernel)
+# of phases) and scalars inside compiled loops (controllers.planner.kernel)
 _jit = njit(cache=True, error_model="numpy")
 
 __all__ = [

@@ -13,7 +13,7 @@ and across an impact ``z+ = F_j z-`` (:func:`impact_jacobian`; :func:`impact_jac
 finite-difference counterpart used to check it).
 
 Derivatives of model terms with respect to ``q1`` and ``q1d`` are taken by the complex step
-through :mod:`envs.model` (exact to rounding), so the model equations are written only once.
+through :mod:`envs.physics.model` (exact to rounding), so the model equations are written only once.
 """
 
 from __future__ import annotations
@@ -25,7 +25,7 @@ import numpy as np
 from numpy.polynomial import polynomial as npoly
 from scipy.optimize import brentq
 
-from envs import model
+from envs.physics import model
 
 from .bezier import BezierConstraint
 from .reduced import ChebyshevSeries, phase_grid, reduced_coefficients, reduced_integral

@@ -1,7 +1,7 @@
 """The walkers behind both environments: :class:`WalkerBatch` and its compiled kernels.
 
 A :class:`WalkerBatch` holds ``n`` walkers of one :class:`envs.settings.EnvSettings` on one
-batched :class:`envs.simulator.Simulator`. After every simulator step one compiled call computes
+batched :class:`envs.physics.simulator.Simulator`. After every simulator step one compiled call computes
 each walker's reward and episode counters and its observation (rescanning the terrain only when
 the stance foot moved). :class:`envs.CompassGaitEnv` is a batch of one and the vector env a batch
 of ``num_envs``, so both give the same numbers step by step.
@@ -20,7 +20,10 @@ import numba
 import numpy as np
 from numba import njit, prange
 
-from . import model
+from .physics import model
+from .physics.kernel import FAILURES
+from .physics.simulator import Simulator
+from .physics.terrain import Terrain
 from .sensors import (
     K_SCAN_RANGE,
     SensorConfig,
@@ -32,9 +35,7 @@ from .sensors import (
     state_walker,
 )
 from .settings import EnvSettings
-from .simulator import FAILURES, Simulator
 from .task import W_ENERGY, W_FAILURE, W_PROGRESS, TerrainSource
-from .terrain import Terrain
 
 #: batches at least this large use the multi-threaded kernels by default (below it the threads'
 #: start-up cost exceeds the gain on a 2-core machine)

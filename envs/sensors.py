@@ -53,7 +53,7 @@ import numpy as np
 from numba import njit
 
 from .config_util import dataclass_from_mapping
-from .terrain import terrain_height
+from .physics.terrain import terrain_height
 
 # indices of the sensor observation (``observation="sensors"``)
 HIP = 0

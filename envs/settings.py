@@ -26,9 +26,9 @@ import yaml
 from configs import CONFIG_DIR
 
 from .config_util import dataclass_from_mapping
-from .params import RobotParams, as_params
+from .physics.params import RobotParams, as_params
+from .physics.simulator import SimConfig
 from .sensors import SensorConfig
-from .simulator import SimConfig
 from .task import InitialState, RewardConfig, TerrainSource
 
 ENV_CONFIG_DIR = CONFIG_DIR / "envs"

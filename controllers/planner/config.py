@@ -15,8 +15,8 @@ from typing import Any
 import numpy as np
 import yaml
 
+from configs import CONFIG_DIR
 from envs.config_util import dataclass_from_mapping
-from envs.params import CONFIG_DIR
 
 from .footholds import FootholdRules
 

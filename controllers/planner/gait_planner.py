@@ -9,7 +9,7 @@ from typing import Any, ClassVar
 
 import numpy as np
 
-from envs.params import RobotParams, as_params
+from envs.physics.params import RobotParams, as_params
 
 from .config import PlannerConfig, PlanningError
 from .footholds import FootholdChains, TerrainMap
@@ -91,7 +91,7 @@ class GaitPlanner:
         """Plan ``horizon`` steps from the post-impact ``state``.
 
         Args:
-            terrain: a :class:`envs.terrain.Terrain`, a spec, a :class:`TerrainMap`, or a scan
+            terrain: a :class:`envs.physics.terrain.Terrain`, a spec, a :class:`TerrainMap`, or a scan
                 ``(xs, heights)`` [m].
             state: actual post-impact ``(q, qd)`` [rad, rad/s] (``q2d > 0``).
             stance_foot: stance-foot position ``(x, y)`` [m].

@@ -6,7 +6,7 @@ compiled loop, what :class:`controllers.planner.problem.StepEvaluator` documents
 dynamics along the constraint, ``theta_dot^2`` and the step time, the nominal input and
 stance-foot reaction, the swing-foot geometry against the terrain (retractable-foot rule,
 vertical faces), the touchdown and impact conditions, and the cost. Every model quantity comes
-from :mod:`envs.model` (its functions compile for scalars) and the reduced dynamics from
+from :mod:`envs.physics.model` (its functions compile for scalars) and the reduced dynamics from
 :mod:`controllers.reduced`; only the loops live here.
 
 The constraints of a row go to the columns of ``G`` that the constraint-group table
@@ -23,9 +23,9 @@ from typing import NamedTuple
 import numpy as np
 from numba import njit
 
-from envs import model
-from envs.params import PL
-from envs.terrain import terrain_height
+from envs.physics import model
+from envs.physics.params import PL
+from envs.physics.terrain import terrain_height
 
 from .. import reduced as rd
 

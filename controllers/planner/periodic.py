@@ -12,7 +12,7 @@ from dataclasses import replace
 
 import numpy as np
 
-from envs.params import RobotParams
+from envs.physics.params import RobotParams
 
 from ..bezier import BezierConstraint
 from .config import PlannerConfig, PlanningError

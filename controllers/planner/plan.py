@@ -13,8 +13,8 @@ from typing import Any
 
 import numpy as np
 
-from envs import model
-from envs.params import RobotParams
+from envs.physics import model
+from envs.physics.params import RobotParams
 
 from .. import reduced as rd
 from ..bezier import BezierConstraint

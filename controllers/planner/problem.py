@@ -31,8 +31,8 @@ from typing import Any, NamedTuple
 import numpy as np
 from scipy.optimize import minimize
 
-from envs import model
-from envs.params import RobotParams
+from envs.physics import model
+from envs.physics.params import RobotParams
 
 from .. import reduced as rd
 from ..bezier import bernstein_basis

@@ -22,8 +22,8 @@ from collections.abc import Iterator
 
 import numpy as np
 
-from envs import model
-from envs.params import RobotParams
+from envs.physics import model
+from envs.physics.params import RobotParams
 
 from ..bezier import BezierConstraint
 from .config import PlannerConfig, PlanningError

@@ -6,7 +6,7 @@ import pytest
 from controllers.bezier import BezierConstraint
 from controllers.reduced import impact_along_constraint
 from controllers.transverse import StepModel
-from envs.params import RobotParams
+from envs.physics.params import RobotParams
 
 
 def flat_chain(robot="paper", th0=0.2, nsteps=3, td_plus=1.3, slope_minus=1.6, order=4):

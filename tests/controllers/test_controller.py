@@ -7,8 +7,8 @@ import pytest
 
 from controllers.controller import ControllerConfig, PDController, TransverseController
 from envs import model, simulate
-from envs.simulator import Simulator
-from envs.terrain import Terrain
+from envs.physics.simulator import Simulator
+from envs.physics.terrain import Terrain
 
 DT = 0.001  # control period of these tests [s]
 V_FLOOR = 0.01  # V reachable with a 1 ms zero-order hold (discretisation floor)
@@ -17,9 +17,7 @@ RATE_BOUND = 0.8  # asserted bound on the per-step contraction of sqrt(V) = |x_p
 TERRAINS = {
     "flat": Terrain.flat(),
     "paper_stairs": Terrain.from_yaml(
-        __import__("envs.params", fromlist=["CONFIG_DIR"]).CONFIG_DIR
-        / "terrains"
-        / "paper_stairs.yaml"
+        __import__("configs").CONFIG_DIR / "terrains" / "paper_stairs.yaml"
     ),
     # the paper's course mirrored (what the gait planner plans for the paper robot)
     "stairs_up": Terrain.stairs([0.4, 0.62], [0.005, 0.005]),

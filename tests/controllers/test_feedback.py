@@ -8,7 +8,7 @@ import pytest
 from controllers.controller import ControllerConfig, TransverseController
 from controllers.feedback import constraint_at, feedback_law, thetadot_sq_at
 from controllers.reduced import pfl_terms
-from envs import model
+from envs.physics import model
 
 
 @pytest.fixture(scope="module")

@@ -6,9 +6,9 @@ import numpy as np
 import pytest
 
 from controllers.observer import HighGainObserver, observer_update, predict_touchdown
-from envs.params import RobotParams
-from envs.simulator import Simulator
-from envs.terrain import Terrain
+from envs.physics.params import RobotParams
+from envs.physics.simulator import Simulator
+from envs.physics.terrain import Terrain
 
 # classic walker's passive limit cycle down a 0.0525 rad slope (control notes, section 1)
 Q0 = np.array([-0.218775 - 0.323775, -0.218775])

@@ -6,8 +6,8 @@ from scipy.integrate import solve_ivp
 
 from controllers import reduced as rd
 from controllers.bezier import BezierConstraint
-from envs import model
-from envs.params import RobotParams
+from envs.physics import model
+from envs.physics.params import RobotParams
 
 ROBOTS = ["paper", "classic"]
 C = BezierConstraint(np.array([-0.5, -0.3, 0.0, 0.3, 0.5]), -0.25, 0.25)

@@ -7,8 +7,8 @@ from scipy.integrate import solve_ivp
 from controllers.bezier import BezierConstraint
 from controllers.reduced import pfl_terms
 from controllers.transverse import StepModel, impact_jacobian, impact_jacobian_fd, surface_state
-from envs import model
-from envs.params import RobotParams
+from envs.physics import model
+from envs.physics.params import RobotParams
 
 K0 = np.array([0.5, -30.0, -9.0])  # some fixed feedback v = K0 x_perp for the closed loop
 

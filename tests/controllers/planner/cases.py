@@ -1,7 +1,7 @@
 """Terrain cases of the planner tests, per robot."""
 
-from envs.params import CONFIG_DIR
-from envs.terrain import Terrain
+from configs import CONFIG_DIR
+from envs.physics.terrain import Terrain
 
 PAPER_STAIRS = Terrain.from_yaml(CONFIG_DIR / "terrains" / "paper_stairs.yaml")
 # terrain cases per robot (the classic walker's legs are l = 1 m, the paper robot's 0.32 m)

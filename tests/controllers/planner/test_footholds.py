@@ -13,7 +13,7 @@ from controllers.planner.footholds import (
     candidate_footholds,
     touchdown_configuration,
 )
-from envs.terrain import Terrain
+from envs.physics.terrain import Terrain
 
 TERRAINS = {
     "flat": Terrain.flat(),

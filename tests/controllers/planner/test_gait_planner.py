@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 
 from controllers.planner import PlanningError, TerrainMap
-from envs.terrain import Terrain
+from envs.physics.terrain import Terrain
 
 from .cases import PAPER_STAIRS
 

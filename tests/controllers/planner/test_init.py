@@ -3,7 +3,7 @@
 import controllers
 import controllers.footsteps
 import controllers.planner
-import controllers.step_kernel
+import controllers.planner.kernel
 from controllers.planner import footholds, kernel
 
 
@@ -17,5 +17,5 @@ def test_public_names_importable_from_the_package():
 def test_former_module_paths_re_export_the_same_objects():
     for name in controllers.footsteps.__all__:
         assert getattr(controllers.footsteps, name) is getattr(footholds, name)
-    for name in controllers.step_kernel.__all__:
-        assert getattr(controllers.step_kernel, name) is getattr(kernel, name)
+    for name in controllers.planner.kernel.__all__:
+        assert getattr(controllers.planner.kernel, name) is getattr(kernel, name)

@@ -5,8 +5,8 @@ import numpy as np
 import pytest
 
 from controllers.planner import GaitPlanner, PlanningError
-from envs import model
-from envs.terrain import Terrain
+from envs.physics import model
+from envs.physics.terrain import Terrain
 
 from .cases import CASES
 

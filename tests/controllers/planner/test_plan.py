@@ -11,7 +11,7 @@ from scipy.integrate import solve_ivp
 from controllers import reduced as rd
 from controllers.bezier import bezier
 from controllers.planner import TerrainMap
-from envs import model
+from envs.physics import model
 
 from .cases import ALL_CASES, CASES, HORIZON
 
@@ -194,7 +194,7 @@ def test_planned_arming_phase_matches_the_simulator(planners, plans):
     it gets ahead by the arming distance (located between check points, where the full-length
     foot must already clear the ground), so the simulator arms it at the planned phase."""
     from envs import SimConfig
-    from envs.simulator import Simulator
+    from envs.physics.simulator import Simulator
 
     pl, plan = planners["paper"], plans["paper", "blocks_high"]
     P = pl.P
