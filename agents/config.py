@@ -36,7 +36,11 @@ from pathlib import Path
 from typing import Any
 
 import gymnasium as gym
+import numpy as np
 import yaml
+
+import envs  # noqa: F401  (registers the roughwalk ids)
+from agents.residual import ResidualWrapper
 
 # Training seeds lie below TRAIN_SEED_LIMIT, evaluation seeds at or above EVAL_SEED_OFFSET, so
 # the courses used to report results are never those drawn during training. The first
@@ -113,9 +117,7 @@ def algorithm_class(name: str) -> type:
 
 
 def check_env_id(env_id: str) -> None:
-    """Raise ConfigError unless ``env_id`` is registered (after ``import envs``)."""
-    import envs  # noqa: F401  (registers the roughwalk ids)
-
+    """Raise ConfigError unless ``env_id`` is registered (``import envs`` registers ours)."""
     if env_id not in gym.registry:
         ours = sorted(k for k in gym.registry if k.startswith("roughwalk/"))
         raise ConfigError(
@@ -224,8 +226,7 @@ class AgentConfig:
 
     @property
     def is_residual(self) -> bool:
-        from agents.residual import ResidualWrapper
-
+        """Whether the agent learns a residual on a base policy (a ``ResidualWrapper``)."""
         return any(issubclass(cls, ResidualWrapper) for cls, _ in self.wrapper_specs())
 
     def algo_kwargs(self) -> dict[str, Any]:
@@ -245,7 +246,6 @@ class AgentConfig:
         return kw
 
     def _action_noise(self) -> Any:
-        import numpy as np
         from stable_baselines3.common.noise import NormalActionNoise, OrnsteinUhlenbeckActionNoise
 
         kind = str(self.hyperparams["noise_type"]).strip()

@@ -30,6 +30,8 @@ from stable_baselines3.common.vec_env.base_vec_env import (
     VecEnvStepReturn,
 )
 
+import envs  # noqa: F401  (registers the roughwalk ids)
+
 
 class SB3VecEnv(VecEnv):
     """stable-baselines3 ``VecEnv`` view of a Gymnasium vector env in same-step autoreset mode.
@@ -168,8 +170,6 @@ def make_sb3_vec_env(
     Sub-env ``i`` is seeded with ``seed + i`` at the first ``reset()``. ``env_kwargs`` go to
     the env (as for ``gym.make``).
     """
-    import envs  # noqa: F401  (registers the roughwalk ids)
-
     venv = gym.make_vec(
         env_id,
         num_envs=n_envs,
