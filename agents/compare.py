@@ -28,7 +28,13 @@ CONFIG_DIR = _CONFIGS / "agents"
 
 @dataclass(frozen=True)
 class Setting:
-    """A column of the comparison: an env id with keyword arguments."""
+    """A column of the comparison: an env id with keyword arguments.
+
+    Attributes:
+        name: the column's name (``flat``, ``rough``, ...).
+        env_id: Gymnasium id.
+        env_kwargs: keyword arguments of ``gym.make``, as ``(name, value)`` pairs.
+    """
 
     name: str
     env_id: str
@@ -36,9 +42,12 @@ class Setting:
 
     @property
     def kwargs(self) -> dict[str, Any]:
+        """``env_kwargs`` as a dict."""
         return dict(self.env_kwargs)
 
     def matches(self, cfg: AgentConfig) -> bool:
+        """Whether the agent config ``cfg`` trains on this setting's env and keyword
+        arguments."""
         return cfg.env_id == self.env_id and cfg.env_kwargs == self.kwargs
 
 
@@ -136,7 +145,23 @@ def compare(
     dry_run: bool = False,
     progress: bool = True,
 ) -> Comparison:
-    """Run the comparison; returns its rows and evaluations (see :class:`Comparison`)."""
+    """Run the comparison; returns its rows and evaluations (see :class:`Comparison`).
+
+    Args:
+        config_dir: folder of the agent configs.
+        log_dir: folder of the training runs (one per config, see ``agents.train``).
+        out: folder of ``compare.json``, ``compare.csv`` and ``compare.md``.
+        episodes: evaluation episodes per row.
+        seed: user seed of the held-out test courses (as :func:`agents.evaluate.evaluate`).
+        only: only the agent configs whose name contains this.
+        baselines: the baseline rows.
+        settings: the terrain settings.
+        train_missing: train the agents without a final model (else raise
+            ``FileNotFoundError``).
+        hyperparams: hyperparameters overriding those of every config.
+        dry_run: list the rows and their commands only; train, evaluate and write nothing.
+        progress: show progress bars.
+    """
     configs = load_agent_configs(Path(config_dir), only, hyperparams)
     rows: list[dict[str, Any]] = []
     evaluations: list[Evaluation] = []
@@ -186,7 +211,8 @@ def _cell(summary: dict[str, Any] | None, key: str, spec: str, scale: float = 1.
 
 
 def markdown_table(rows: list[dict[str, Any]]) -> str:
-    """The README table: one line per (setting, policy)."""
+    """The README table (markdown) of the comparison's ``rows``: one line per (setting,
+    policy)."""
     lines = [
         "| terrain | policy | success [%] | footsteps | distance [m] | speed [m/s] | CoT "
         "| failures | training budget | command |",

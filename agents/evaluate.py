@@ -50,7 +50,21 @@ def eval_seeds(seed: int, episodes: int) -> list[int]:
 
 @dataclass
 class EpisodeResult:
-    """One evaluation episode (units: m, s, J)."""
+    """One evaluation episode.
+
+    Attributes:
+        seed: the absolute reset seed (``env.reset(seed=seed)`` replays the episode).
+        success: no failure before the episode ended.
+        failure: the failure's name (``envs.FAILURES``), or None.
+        steps: control steps taken.
+        duration: ``steps`` times the control period [s].
+        footsteps: footsteps taken.
+        distance: distance walked [m].
+        speed: ``distance / duration`` [m/s].
+        motor_work: absolute motor work [J].
+        cost_of_transport: ``motor_work / (m g distance)``, None without forward progress.
+        episode_return: sum of the rewards.
+    """
 
     seed: int
     success: bool
@@ -67,7 +81,17 @@ class EpisodeResult:
 
 @dataclass
 class Evaluation:
-    """Episodes of one policy on one env, and their summary."""
+    """Episodes of one policy on one env, and their summary.
+
+    Attributes:
+        policy: the policy evaluated (a baseline's name or a model's path).
+        env_id: Gymnasium id of the env.
+        env_kwargs: keyword arguments the env was made with.
+        episodes: the episodes, in seed order.
+        total_mass: the robot's total mass [kg].
+        gravity: gravitational acceleration [m/s^2].
+        summary: the metrics over the episodes (computed by :func:`summarize` when empty).
+    """
 
     policy: str
     env_id: str
@@ -82,6 +106,7 @@ class Evaluation:
             self.summary = summarize(self.episodes, self.total_mass, self.gravity)
 
     def to_dict(self) -> dict[str, Any]:
+        """The evaluation as plain data (the JSON output)."""
         return {
             "policy": self.policy,
             "env_id": self.env_id,
@@ -124,7 +149,8 @@ def _robot(env: gym.Env) -> tuple[float, float, float]:
 def run_episode(
     env: gym.Env, policy: Policy, seed: int, max_steps: int | None = None
 ) -> EpisodeResult:
-    """Roll ``policy`` out on ``env`` from ``reset(seed=seed)`` until the episode ends."""
+    """Roll ``policy`` out on ``env`` from ``reset(seed=seed)`` until the episode ends (or
+    after ``max_steps`` steps, if given)."""
     mass, g, dt = _robot(env)
     obs, info = env.reset(seed=seed)
     policy.reset()
@@ -163,7 +189,17 @@ def make_eval_env(
     env_kwargs: dict[str, Any] | None = None,
     vecnormalize: str | None = None,
 ) -> tuple[gym.Env, Policy, str, dict[str, Any]]:
-    """The env (with the agent's wrappers) and the policy for ``policy_spec``."""
+    """The env (with the agent's wrappers) and the policy for ``policy_spec``.
+
+    Args:
+        policy_spec: a baseline's name (``BASELINES``) or the path of a trained model.
+        env_id: Gymnasium id; None for a trained model's own env (from its run).
+        env_kwargs: keyword arguments of ``gym.make`` (default: a trained model's own).
+        vecnormalize: a trained model's ``VecNormalize`` statistics (default: beside it).
+
+    Returns:
+        ``(env, policy, env_id, env_kwargs)``, with the env id and keyword arguments used.
+    """
     trained = None
     if policy_spec not in BASELINES:
         trained = load_policy(policy_spec, vecnormalize=vecnormalize)
@@ -200,7 +236,17 @@ def evaluate(
     vecnormalize: str | None = None,
     progress: bool = False,
 ) -> Evaluation:
-    """Evaluate a baseline (``passive``, ``pd``, ``reference``) or a trained model (path)."""
+    """Evaluate a baseline (``passive``, ``pd``, ``reference``) or a trained model (path).
+
+    Args:
+        policy_spec: a baseline's name or the path of a trained model (``.zip``).
+        env_id: Gymnasium id; None for a trained model's own env.
+        episodes: number of episodes.
+        seed: user seed; episode ``k`` resets with ``EVAL_SEED_OFFSET + seed + k``.
+        env_kwargs: keyword arguments of ``gym.make`` (default: a trained model's own).
+        vecnormalize: a trained model's ``VecNormalize`` statistics (default: beside it).
+        progress: show a progress bar.
+    """
     seeds = eval_seeds(seed, episodes)
     env, policy, env_id, env_kwargs = make_eval_env(policy_spec, env_id, env_kwargs, vecnormalize)
     mass, g, _ = _robot(env)
@@ -217,14 +263,16 @@ def evaluate(
 
 
 def write_json(evaluations: Sequence[Evaluation], path: str | Path) -> None:
-    """All evaluations with their per-episode results."""
+    """Write the ``evaluations`` with their per-episode results to ``path`` as JSON (one
+    object for one evaluation, else a list)."""
     Path(path).parent.mkdir(parents=True, exist_ok=True)
     data = [ev.to_dict() for ev in evaluations]
     Path(path).write_text(json.dumps(data[0] if len(data) == 1 else data, indent=2) + "\n")
 
 
 def write_csv(evaluations: Sequence[Evaluation], path: str | Path) -> None:
-    """One row per episode, with the policy and env in the first columns."""
+    """Write the episodes of the ``evaluations`` to ``path`` as CSV: one row per episode,
+    with the policy and env in the first columns."""
     Path(path).parent.mkdir(parents=True, exist_ok=True)
     names = [f.name for f in EpisodeResult.__dataclass_fields__.values()]
     with open(path, "w", newline="") as fh:
@@ -257,7 +305,8 @@ def read_monitor_logs(folder: str | Path) -> np.ndarray:
 
 
 def plot_learning_curve(run_dir: str | Path, out: str | Path) -> Path:
-    """Plot training episode returns and periodic evaluation returns against env steps."""
+    """Plot the training episode returns and the periodic evaluation returns of the run in
+    ``run_dir`` against env steps; writes the PNG ``out`` and returns its path."""
     from matplotlib.figure import Figure
 
     run_dir = Path(run_dir)

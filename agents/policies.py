@@ -26,13 +26,19 @@ BASELINES = ("passive", "pd", "reference")
 class Policy(Protocol):
     """What ``evaluate`` and ``ResidualWrapper`` need from a policy."""
 
-    def reset(self) -> None: ...
+    def reset(self) -> None:
+        """Start a new episode (called after each ``env.reset``)."""
+        ...
 
     def __call__(self, obs: Any) -> np.ndarray: ...
 
 
 class ZeroPolicy:
-    """The passive walker: a zero command whatever the observation."""
+    """The passive walker: a zero command whatever the observation.
+
+    Args:
+        action_space: the env's action space (the command's shape and dtype).
+    """
 
     def __init__(self, action_space: gym.spaces.Box) -> None:
         self._action = np.zeros(action_space.shape, dtype=action_space.dtype)

@@ -19,7 +19,8 @@ MANIFEST = "manifest.json"
 
 
 def find_manifest(model_path: str | Path) -> Path | None:
-    """The ``manifest.json`` of the run a model file belongs to (searching up to two levels)."""
+    """The ``manifest.json`` of the run the model file ``model_path`` belongs to (searching up
+    to two levels), or None."""
     p = Path(model_path).resolve().parent
     for d in (p, p.parent, p.parent.parent):
         if (d / MANIFEST).is_file():
@@ -28,7 +29,8 @@ def find_manifest(model_path: str | Path) -> Path | None:
 
 
 def find_vecnormalize(model_path: str | Path) -> Path | None:
-    """The ``VecNormalize`` statistics saved with a model by ``roughwalk train``, if any.
+    """The ``VecNormalize`` statistics saved with the model ``model_path`` by ``roughwalk
+    train`` (or rl-zoo3), if any.
 
     ``checkpoints/rl_model_<N>_steps.zip`` -> ``rl_model_vecnormalize_<N>_steps.pkl``;
     ``best_model.zip`` -> ``best_vecnormalize.pkl``; ``model.zip`` -> ``vecnormalize.pkl``;
@@ -86,7 +88,8 @@ def zoo_config(folder: Path, algo: str | None = None) -> dict[str, Any]:
 
 
 def load_vecnormalize(path: str | Path) -> Any:
-    """``VecNormalize`` statistics saved by SB3, without an env attached (for normalising)."""
+    """The ``VecNormalize`` statistics SB3 saved in ``path``, without an env attached (for
+    normalising observations; no updates, no reward normalisation)."""
     with open(path, "rb") as fh:
         vn = pickle.load(fh)
     vn.training = False

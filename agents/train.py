@@ -167,7 +167,7 @@ def set_threads(threads: int | None) -> None:
 
 
 def run_dir_for(cfg: AgentConfig, log_dir: str | Path) -> Path:
-    """``<log_dir>/<config name>_s<seed>``."""
+    """The run directory of ``cfg`` in ``log_dir``: ``<log_dir>/<config name>_s<seed>``."""
     return Path(log_dir) / f"{cfg.name}_s{cfg.seed}"
 
 
@@ -191,8 +191,13 @@ def build(
 ) -> tuple[Any, Any, Any]:
     """The model, its training VecEnv and the evaluation VecEnv (None without evaluation).
 
-    From scratch, or from checkpoint ``resume`` with its VecNormalize statistics and, if saved,
-    its replay buffer.
+    Args:
+        cfg: the agent config.
+        run_dir: the run directory (monitor logs, TensorBoard logs).
+        resume: build from this checkpoint, with its VecNormalize statistics and, if saved,
+            its replay buffer (default: from scratch).
+        tensorboard: write TensorBoard logs (if tensorboard is installed).
+        verbose: SB3 verbosity (0, 1, 2).
     """
     from stable_baselines3.common.vec_env import VecFrameStack, VecNormalize
 
@@ -277,8 +282,15 @@ def train(
 ) -> Path:
     """Train the agent of ``cfg``; returns the run directory (layout in the module docstring).
 
-    ``threads``: torch threads (None: torch's default). One is fastest for these small
-    networks: on 2 busy cores, two threads made PPO more than ten times slower.
+    Args:
+        cfg: the agent config.
+        log_dir: folder of the runs; None with ``resume``: the checkpoint's run.
+        resume: continue from this checkpoint ``.zip`` up to the config's ``n_timesteps``.
+        progress_bar: show SB3's progress bar.
+        verbose: SB3 verbosity (0, 1, 2).
+        tensorboard: write TensorBoard logs (if tensorboard is installed).
+        threads: torch threads (None: torch's default). One is fastest for these small
+            networks: on 2 busy cores, two threads made PPO more than ten times slower.
     """
     set_threads(threads)
     resume_path = Path(resume) if resume else None

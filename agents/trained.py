@@ -90,7 +90,8 @@ class TrainedPolicy:
         self._stack = None
 
     def normalize(self, obs: np.ndarray) -> np.ndarray:
-        """The observation as the network saw it in training (normalised, then stacked)."""
+        """The observation ``obs`` as the network saw it in training (normalised, then
+        stacked)."""
         if self.obs_norm is not None:
             obs = self.obs_norm.normalize_obs(obs)
         if not self.frame_stack:
@@ -109,7 +110,8 @@ class TrainedPolicy:
 
 
 def load_policy(spec: str, env: gym.Env | None = None, **kwargs: Any) -> Policy:
-    """A baseline by name (needs ``env``) or a trained model by path."""
+    """The policy ``spec``: a baseline by name (for ``env``, which it needs) or a trained model
+    by path (``kwargs`` go to :class:`TrainedPolicy`)."""
     if spec in BASELINES:
         if env is None:
             raise ValueError(f"baseline policy {spec!r} needs the env")
