@@ -10,7 +10,11 @@ from stable_baselines3.common.callbacks import BaseCallback, EvalCallback
 
 
 class SaveVecNormalizeOnBest(BaseCallback):
-    """Save the ``VecNormalize`` statistics beside ``best_model.zip`` (``callback_on_new_best``)."""
+    """Save the ``VecNormalize`` statistics beside ``best_model.zip`` (``callback_on_new_best``).
+
+    Args:
+        save_path: the folder of ``best_model.zip``.
+    """
 
     def __init__(self, save_path: str | Path) -> None:
         super().__init__()
@@ -30,6 +34,11 @@ class HeldOutEvalCallback(EvalCallback):
     offset), so all evaluations of a run use the same held-out courses. Besides SB3's
     ``eval/mean_reward`` it logs ``eval/success_rate`` (episodes ending without failure),
     ``eval/footsteps`` and ``eval/distance`` [m], read from the env's final ``info``.
+
+    Args:
+        eval_env: the evaluation env (an SB3 ``VecEnv``).
+        seed: the seed of the evaluation courses (>= ``agents.config.EVAL_SEED_OFFSET``).
+        kwargs: the other arguments of SB3's ``EvalCallback``.
     """
 
     def __init__(self, eval_env: Any, seed: int, **kwargs: Any) -> None:

@@ -1,25 +1,26 @@
-"""Run the whole RL-versus-control comparison: baselines and every agent config, one table.
+"""The RL-versus-control comparison: baselines and every agent config, one table.
 
-For each terrain setting (flat, the paper's stairs, rough blocks at two difficulty levels) it
-evaluates the baselines (passive, PD, reference controller) and, for every config in
-``configs/agents`` whose env matches the setting, trains the agent (unless its run already has a
-final model) and evaluates it (the best model of the periodic evaluations on the validation
-courses, else the final one; see :func:`chosen_model`), all on the same held-out test seeds.
-It writes ``compare.json`` (every episode), ``compare.csv`` and ``compare.md`` (the summary
-table with the command reproducing each row and the training budget) to ``--out`` and prints
-the table.
+For each terrain setting (flat, the paper's stairs, rough blocks at two difficulty levels)
+:func:`compare` evaluates the baselines (passive, PD, reference controller) and, for every
+config in ``configs/agents`` whose env matches the setting, trains the agent (unless its run
+already has a final model) and evaluates it (the best model of the periodic evaluations on the
+validation courses, else the final one; see :func:`chosen_model`), all on the same held-out
+test seeds. It writes ``compare.json`` (every episode), ``compare.csv`` and ``compare.md`` (the
+summary table with the command reproducing each row and the training budget; see
+:func:`markdown_table`) to its output folder.
 """
 
 from __future__ import annotations
 
-import argparse
+import datetime as dt
 import json
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from agents.config import TEST_SEED, AgentConfig, ConfigError, load_config
-from agents.evaluate import Evaluation, evaluate, print_table, write_csv
+from agents.config import TEST_SEED, AgentConfig, load_config
+from agents.evaluate import Evaluation, evaluate, write_csv
+from agents.train import run_dir_for, train
 from configs import CONFIG_DIR as _CONFIGS
 
 CONFIG_DIR = _CONFIGS / "agents"
@@ -27,7 +28,13 @@ CONFIG_DIR = _CONFIGS / "agents"
 
 @dataclass(frozen=True)
 class Setting:
-    """A column of the comparison: an env id with keyword arguments."""
+    """A column of the comparison: an env id with keyword arguments.
+
+    Attributes:
+        name: the column's name (``flat``, ``rough``, ...).
+        env_id: Gymnasium id.
+        env_kwargs: keyword arguments of ``gym.make``, as ``(name, value)`` pairs.
+    """
 
     name: str
     env_id: str
@@ -35,9 +42,12 @@ class Setting:
 
     @property
     def kwargs(self) -> dict[str, Any]:
+        """``env_kwargs`` as a dict."""
         return dict(self.env_kwargs)
 
     def matches(self, cfg: AgentConfig) -> bool:
+        """Whether the agent config ``cfg`` trains on this setting's env and keyword
+        arguments."""
         return cfg.env_id == self.env_id and cfg.env_kwargs == self.kwargs
 
 
@@ -48,6 +58,20 @@ SETTINGS = (
     Setting("rough-hard", "roughwalk/CompassGaitRough-v0", (("difficulty", 2.0),)),
 )
 BASELINE_ROWS = ("passive", "pd", "reference")
+
+
+@dataclass(frozen=True)
+class Comparison:
+    """What :func:`compare` returns.
+
+    Attributes:
+        rows: one dict per (setting, policy) with ``setting``, ``policy``, ``budget``,
+            ``command`` and, unless a dry run, ``summary`` (the columns of ``compare.md``).
+        evaluations: the evaluations behind the rows, in row order (none in a dry run).
+    """
+
+    rows: list[dict[str, Any]]
+    evaluations: list[Evaluation]
 
 
 def agent_label(cfg: AgentConfig) -> str:
@@ -88,8 +112,6 @@ def budget(cfg: AgentConfig, run_dir: Path) -> str:
     text = f"{cfg.n_timesteps:,} steps"
     manifest = run_dir / "manifest.json"
     if manifest.is_file():
-        import datetime as dt
-
         m = json.loads(manifest.read_text())
         if "started" in m and "finished" in m:
             wall = dt.datetime.fromisoformat(m["finished"]) - dt.datetime.fromisoformat(
@@ -122,10 +144,24 @@ def compare(
     hyperparams: dict[str, Any] | None = None,
     dry_run: bool = False,
     progress: bool = True,
-) -> list[dict[str, Any]]:
-    """Run the comparison; returns one row dict per (setting, policy) (see ``compare.md``)."""
-    from agents.train import run_dir_for, train
+) -> Comparison:
+    """Run the comparison; returns its rows and evaluations (see :class:`Comparison`).
 
+    Args:
+        config_dir: folder of the agent configs.
+        log_dir: folder of the training runs (one per config, see ``agents.train``).
+        out: folder of ``compare.json``, ``compare.csv`` and ``compare.md``.
+        episodes: evaluation episodes per row.
+        seed: user seed of the held-out test courses (as :func:`agents.evaluate.evaluate`).
+        only: only the agent configs whose name contains this.
+        baselines: the baseline rows.
+        settings: the terrain settings.
+        train_missing: train the agents without a final model (else raise
+            ``FileNotFoundError``).
+        hyperparams: hyperparameters overriding those of every config.
+        dry_run: list the rows and their commands only; train, evaluate and write nothing.
+        progress: show progress bars.
+    """
     configs = load_agent_configs(Path(config_dir), only, hyperparams)
     rows: list[dict[str, Any]] = []
     evaluations: list[Evaluation] = []
@@ -165,8 +201,7 @@ def compare(
         )
         write_csv(evaluations, out / "compare.csv")
         (out / "compare.md").write_text(markdown_table(rows))
-        print_table(evaluations, title=f"held-out seeds from {seed}, {episodes} episodes")
-    return rows
+    return Comparison(rows, evaluations)
 
 
 def _cell(summary: dict[str, Any] | None, key: str, spec: str, scale: float = 1.0) -> str:
@@ -176,7 +211,8 @@ def _cell(summary: dict[str, Any] | None, key: str, spec: str, scale: float = 1.
 
 
 def markdown_table(rows: list[dict[str, Any]]) -> str:
-    """The README table: one line per (setting, policy)."""
+    """The README table (markdown) of the comparison's ``rows``: one line per (setting,
+    policy)."""
     lines = [
         "| terrain | policy | success [%] | footsteps | distance [m] | speed [m/s] | CoT "
         "| failures | training budget | command |",
@@ -193,57 +229,3 @@ def markdown_table(rows: list[dict[str, Any]]) -> str:
             f"| {failures if s else '-'} | {r['budget']} | `{r['command']}` |"
         )
     return "\n".join(lines) + "\n"
-
-
-def configure(parser: argparse.ArgumentParser) -> None:
-    """Arguments of ``roughwalk compare``."""
-    parser.add_argument("--configs", type=Path, default=CONFIG_DIR, help="agent config folder")
-    parser.add_argument("--only", help="only agent configs whose name contains this")
-    parser.add_argument(
-        "--terrains",
-        nargs="+",
-        choices=[x.name for x in SETTINGS],
-        help="only these terrain settings (default: all)",
-    )
-    parser.add_argument("--log-dir", type=Path, default=Path("runs"), help="runs folder")
-    parser.add_argument("--out", type=Path, default=Path("results"), help="output folder")
-    parser.add_argument("--episodes", type=int, default=50, help="episodes per row")
-    parser.add_argument(
-        "--seed", type=int, default=TEST_SEED, help="held-out seed offset (as evaluate)"
-    )
-    parser.add_argument(
-        "--no-train", action="store_true", help="fail instead of training missing agents"
-    )
-    parser.add_argument(
-        "--dry-run", action="store_true", help="print the table of commands, run nothing"
-    )
-    parser.add_argument("--no-progress", action="store_true", help="no progress bars")
-    parser.add_argument("--threads", type=int, default=1, help="torch threads (default 1)")
-
-
-def run(args: argparse.Namespace) -> int:
-    """``roughwalk compare``."""
-    from agents.train import set_threads
-
-    set_threads(args.threads)
-    try:
-        rows = compare(
-            config_dir=args.configs,
-            log_dir=args.log_dir,
-            out=args.out,
-            episodes=args.episodes,
-            seed=args.seed,
-            only=args.only,
-            settings=tuple(x for x in SETTINGS if not args.terrains or x.name in args.terrains),
-            train_missing=not args.no_train,
-            dry_run=args.dry_run,
-            progress=not args.no_progress,
-        )
-    except (ConfigError, FileNotFoundError, ValueError) as exc:
-        print(f"roughwalk compare: error: {exc}")
-        return 2
-    if args.dry_run:
-        print(markdown_table(rows), end="")
-    else:
-        print(f"results in {args.out}/compare.md, compare.json, compare.csv")
-    return 0

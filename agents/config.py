@@ -36,7 +36,11 @@ from pathlib import Path
 from typing import Any
 
 import gymnasium as gym
+import numpy as np
 import yaml
+
+import envs  # noqa: F401  (registers the roughwalk ids)
+from agents.residual import ResidualWrapper
 
 # Training seeds lie below TRAIN_SEED_LIMIT, evaluation seeds at or above EVAL_SEED_OFFSET, so
 # the courses used to report results are never those drawn during training. The first
@@ -113,9 +117,7 @@ def algorithm_class(name: str) -> type:
 
 
 def check_env_id(env_id: str) -> None:
-    """Raise ConfigError unless ``env_id`` is registered (after ``import envs``)."""
-    import envs  # noqa: F401  (registers the roughwalk ids)
-
+    """Raise ConfigError unless ``env_id`` is registered (``import envs`` registers ours)."""
     if env_id not in gym.registry:
         ours = sorted(k for k in gym.registry if k.startswith("roughwalk/"))
         raise ConfigError(
@@ -143,7 +145,23 @@ def linear_schedule(initial: float) -> Callable[[float], float]:
 
 @dataclass
 class AgentConfig:
-    """A validated agent config (see the module docstring for the file format)."""
+    """A validated agent config (see the module docstring for the file format).
+
+    Attributes:
+        path: the file it was read from (its stem names the run).
+        algo: algorithm name (``ppo``, ``sac``, ``td3``, ``a2c``).
+        env_id: Gymnasium id of the environment.
+        hyperparams: the env-id section (rl-zoo3 format), overrides applied.
+        seed: training seed; training env ``i`` is seeded with ``seed + i``.
+        eval_freq: env steps between periodic evaluations (0: none).
+        eval_episodes: episodes per periodic evaluation.
+        eval_seed: first validation seed of the periodic evaluations (offset by
+            ``EVAL_SEED_OFFSET``).
+        checkpoint_freq: env steps between checkpoints (0: none).
+        save_replay_buffer: also checkpoint the replay buffer (off-policy algorithms).
+        vec_env: ``dummy``, ``subproc`` or ``native`` (see the module docstring).
+        raw: the file's contents as read.
+    """
 
     path: Path
     algo: str
@@ -165,18 +183,22 @@ class AgentConfig:
 
     @property
     def algo_class(self) -> type:
+        """The stable-baselines3 class of ``algo``."""
         return algorithm_class(self.algo)
 
     @property
     def n_timesteps(self) -> int:
+        """Training budget [env steps]."""
         return int(self.hyperparams["n_timesteps"])
 
     @property
     def n_envs(self) -> int:
+        """Number of training envs (1 unless the config says otherwise)."""
         return int(self.hyperparams.get("n_envs", 1))
 
     @property
     def env_kwargs(self) -> dict[str, Any]:
+        """Keyword arguments of ``gym.make`` for the env (a copy)."""
         return dict(self.hyperparams.get("env_kwargs") or {})
 
     @property
@@ -224,8 +246,7 @@ class AgentConfig:
 
     @property
     def is_residual(self) -> bool:
-        from agents.residual import ResidualWrapper
-
+        """Whether the agent learns a residual on a base policy (a ``ResidualWrapper``)."""
         return any(issubclass(cls, ResidualWrapper) for cls, _ in self.wrapper_specs())
 
     def algo_kwargs(self) -> dict[str, Any]:
@@ -245,7 +266,6 @@ class AgentConfig:
         return kw
 
     def _action_noise(self) -> Any:
-        import numpy as np
         from stable_baselines3.common.noise import NormalActionNoise, OrnsteinUhlenbeckActionNoise
 
         kind = str(self.hyperparams["noise_type"]).strip()
@@ -290,7 +310,8 @@ def parse_value(text: str) -> Any:
 
 
 def parse_assignments(items: list[str] | None) -> dict[str, Any]:
-    """``["a=1", "b=[64, 64]", "c:0.5"]`` -> ``{"a": 1, "b": [64, 64], "c": 0.5}``.
+    """Command-line ``items`` as a dict: ``["a=1", "b=[64, 64]", "c:0.5"]`` ->
+    ``{"a": 1, "b": [64, 64], "c": 0.5}`` (values parsed as YAML).
 
     ``KEY:VALUE`` (rl-zoo3's ``-params`` form) is accepted where the item has no ``=``.
     """
@@ -337,7 +358,17 @@ def config_from_dict(
     overrides: Mapping[str, Any] | None = None,
     run_overrides: Mapping[str, Any] | None = None,
 ) -> AgentConfig:
-    """Validate a config given as a dict (see ``load_config``)."""
+    """Validate a config given as a dict.
+
+    Args:
+        data: the file's contents (a ``run`` section and an env-id section).
+        path: where it came from, for the messages and the run's name.
+        overrides: hyperparameters replacing those of ``data``.
+        run_overrides: ``run`` settings replacing those of ``data``.
+
+    Raises:
+        ConfigError: as :func:`load_config`.
+    """
     path = Path(path)
     run = data.get("run")
     if not isinstance(run, dict):

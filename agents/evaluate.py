@@ -1,11 +1,13 @@
-"""Evaluate a policy on held-out courses: success, footsteps, distance, speed, cost of transport.
+"""Evaluation of a policy on held-out courses: success, footsteps, distance, speed, cost of
+transport.
 
 Seed split: training envs are seeded below 1,000,000 (``agents.config.TRAIN_SEED_LIMIT``);
-evaluation episode ``k`` resets its env with seed ``1,000,000 + S + k`` (``--seed S``, S >= 0),
+evaluation episode ``k`` resets its env with seed ``1,000,000 + S + k`` (``seed=S``, S >= 0),
 so evaluation courses are never the ones a training run starts from. Seeds 1,000,000 to
 1,000,999 are the validation courses of the periodic evaluation during training (which selects
-``best_model.zip``); ``--seed`` defaults to 1000, past them. The absolute seed of every
-episode is recorded in the JSON/CSV output: ``env.reset(seed=...)`` replays it.
+``best_model.zip``); ``seed`` defaults to 1000 (``agents.config.TEST_SEED``), past them. The
+absolute seed of every episode is recorded in the JSON/CSV output: ``env.reset(seed=...)``
+replays it.
 
 Metrics per episode: success (no failure before the episode ended, i.e. the time limit was
 reached), footsteps taken (until failure or time limit), distance walked [m], mean speed
@@ -16,7 +18,6 @@ over episodes; the summary cost of transport is total work over total ``m g dist
 
 from __future__ import annotations
 
-import argparse
 import csv
 import json
 from collections import Counter
@@ -28,8 +29,10 @@ from typing import Any
 import gymnasium as gym
 import numpy as np
 
-from agents.config import EVAL_SEED_OFFSET, MAX_SEED, TEST_SEED, ConfigError, parse_assignments
-from agents.policies import BASELINES, Policy, TrainedPolicy, load_policy
+import envs  # noqa: F401  (registers the roughwalk ids)
+from agents.config import EVAL_SEED_OFFSET, MAX_SEED, TEST_SEED, ConfigError
+from agents.policies import BASELINES, Policy
+from agents.trained import TrainedPolicy, load_policy
 
 
 def eval_seeds(seed: int, episodes: int) -> list[int]:
@@ -47,7 +50,21 @@ def eval_seeds(seed: int, episodes: int) -> list[int]:
 
 @dataclass
 class EpisodeResult:
-    """One evaluation episode (units: m, s, J)."""
+    """One evaluation episode.
+
+    Attributes:
+        seed: the absolute reset seed (``env.reset(seed=seed)`` replays the episode).
+        success: no failure before the episode ended.
+        failure: the failure's name (``envs.FAILURES``), or None.
+        steps: control steps taken.
+        duration: ``steps`` times the control period [s].
+        footsteps: footsteps taken.
+        distance: distance walked [m].
+        speed: ``distance / duration`` [m/s].
+        motor_work: absolute motor work [J].
+        cost_of_transport: ``motor_work / (m g distance)``, None without forward progress.
+        episode_return: sum of the rewards.
+    """
 
     seed: int
     success: bool
@@ -64,7 +81,17 @@ class EpisodeResult:
 
 @dataclass
 class Evaluation:
-    """Episodes of one policy on one env, and their summary."""
+    """Episodes of one policy on one env, and their summary.
+
+    Attributes:
+        policy: the policy evaluated (a baseline's name or a model's path).
+        env_id: Gymnasium id of the env.
+        env_kwargs: keyword arguments the env was made with.
+        episodes: the episodes, in seed order.
+        total_mass: the robot's total mass [kg].
+        gravity: gravitational acceleration [m/s^2].
+        summary: the metrics over the episodes (computed by :func:`summarize` when empty).
+    """
 
     policy: str
     env_id: str
@@ -79,6 +106,7 @@ class Evaluation:
             self.summary = summarize(self.episodes, self.total_mass, self.gravity)
 
     def to_dict(self) -> dict[str, Any]:
+        """The evaluation as plain data (the JSON output)."""
         return {
             "policy": self.policy,
             "env_id": self.env_id,
@@ -121,7 +149,8 @@ def _robot(env: gym.Env) -> tuple[float, float, float]:
 def run_episode(
     env: gym.Env, policy: Policy, seed: int, max_steps: int | None = None
 ) -> EpisodeResult:
-    """Roll ``policy`` out on ``env`` from ``reset(seed=seed)`` until the episode ends."""
+    """Roll ``policy`` out on ``env`` from ``reset(seed=seed)`` until the episode ends (or
+    after ``max_steps`` steps, if given)."""
     mass, g, dt = _robot(env)
     obs, info = env.reset(seed=seed)
     policy.reset()
@@ -160,9 +189,17 @@ def make_eval_env(
     env_kwargs: dict[str, Any] | None = None,
     vecnormalize: str | None = None,
 ) -> tuple[gym.Env, Policy, str, dict[str, Any]]:
-    """The env (with the agent's wrappers) and the policy for ``policy_spec``."""
-    import envs  # noqa: F401  (registers the ids)
+    """The env (with the agent's wrappers) and the policy for ``policy_spec``.
 
+    Args:
+        policy_spec: a baseline's name (``BASELINES``) or the path of a trained model.
+        env_id: Gymnasium id; None for a trained model's own env (from its run).
+        env_kwargs: keyword arguments of ``gym.make`` (default: a trained model's own).
+        vecnormalize: a trained model's ``VecNormalize`` statistics (default: beside it).
+
+    Returns:
+        ``(env, policy, env_id, env_kwargs)``, with the env id and keyword arguments used.
+    """
     trained = None
     if policy_spec not in BASELINES:
         trained = load_policy(policy_spec, vecnormalize=vecnormalize)
@@ -199,7 +236,17 @@ def evaluate(
     vecnormalize: str | None = None,
     progress: bool = False,
 ) -> Evaluation:
-    """Evaluate a baseline (``passive``, ``pd``, ``reference``) or a trained model (path)."""
+    """Evaluate a baseline (``passive``, ``pd``, ``reference``) or a trained model (path).
+
+    Args:
+        policy_spec: a baseline's name or the path of a trained model (``.zip``).
+        env_id: Gymnasium id; None for a trained model's own env.
+        episodes: number of episodes.
+        seed: user seed; episode ``k`` resets with ``EVAL_SEED_OFFSET + seed + k``.
+        env_kwargs: keyword arguments of ``gym.make`` (default: a trained model's own).
+        vecnormalize: a trained model's ``VecNormalize`` statistics (default: beside it).
+        progress: show a progress bar.
+    """
     seeds = eval_seeds(seed, episodes)
     env, policy, env_id, env_kwargs = make_eval_env(policy_spec, env_id, env_kwargs, vecnormalize)
     mass, g, _ = _robot(env)
@@ -215,63 +262,17 @@ def evaluate(
     return Evaluation(policy_spec, env_id, env_kwargs, results, mass, g)
 
 
-def _fmt(value: Any, spec: str) -> str:
-    return "-" if value is None else format(value, spec)
-
-
-def summary_row(ev: Evaluation) -> list[str]:
-    """One table row: policy, env, success, footsteps, distance, speed, CoT, failures."""
-    s = ev.summary
-    kw = ",".join(f"{k}={v}" for k, v in ev.env_kwargs.items())
-    failures = ", ".join(f"{k} {v}" for k, v in sorted(s["failure_reasons"].items())) or "-"
-    return [
-        ev.policy
-        if ev.policy in BASELINES
-        else f"{Path(ev.policy).parent.name}/{Path(ev.policy).stem}",
-        ev.env_id.removeprefix("roughwalk/") + (f" ({kw})" if kw else ""),
-        f"{100 * s['success_rate']:.0f}% ({s['episodes']})",
-        _fmt(s["mean_footsteps"], ".1f"),
-        _fmt(s["mean_distance"], ".2f"),
-        _fmt(s["mean_speed"], ".3f"),
-        _fmt(s["cost_of_transport"], ".3f"),
-        failures,
-    ]
-
-
-TABLE_COLUMNS = (
-    "policy",
-    "env",
-    "success",
-    "footsteps",
-    "distance (m)",
-    "speed (m/s)",
-    "CoT",
-    "failures",
-)
-
-
-def print_table(evaluations: Sequence[Evaluation], title: str | None = None) -> None:
-    """Print a rich table with one row per evaluation."""
-    from rich.console import Console
-    from rich.table import Table
-
-    table = Table(title=title)
-    for i, col in enumerate(TABLE_COLUMNS):
-        table.add_column(col, justify="right" if 1 < i < 7 else "left")
-    for ev in evaluations:
-        table.add_row(*summary_row(ev))
-    Console().print(table)
-
-
 def write_json(evaluations: Sequence[Evaluation], path: str | Path) -> None:
-    """All evaluations with their per-episode results."""
+    """Write the ``evaluations`` with their per-episode results to ``path`` as JSON (one
+    object for one evaluation, else a list)."""
     Path(path).parent.mkdir(parents=True, exist_ok=True)
     data = [ev.to_dict() for ev in evaluations]
     Path(path).write_text(json.dumps(data[0] if len(data) == 1 else data, indent=2) + "\n")
 
 
 def write_csv(evaluations: Sequence[Evaluation], path: str | Path) -> None:
-    """One row per episode, with the policy and env in the first columns."""
+    """Write the episodes of the ``evaluations`` to ``path`` as CSV: one row per episode,
+    with the policy and env in the first columns."""
     Path(path).parent.mkdir(parents=True, exist_ok=True)
     names = [f.name for f in EpisodeResult.__dataclass_fields__.values()]
     with open(path, "w", newline="") as fh:
@@ -304,7 +305,8 @@ def read_monitor_logs(folder: str | Path) -> np.ndarray:
 
 
 def plot_learning_curve(run_dir: str | Path, out: str | Path) -> Path:
-    """Plot training episode returns and periodic evaluation returns against env steps."""
+    """Plot the training episode returns and the periodic evaluation returns of the run in
+    ``run_dir`` against env steps; writes the PNG ``out`` and returns its path."""
     from matplotlib.figure import Figure
 
     run_dir = Path(run_dir)
@@ -336,73 +338,3 @@ def plot_learning_curve(run_dir: str | Path, out: str | Path) -> Path:
     out.parent.mkdir(parents=True, exist_ok=True)
     fig.savefig(out, dpi=120)
     return out
-
-
-def configure(parser: argparse.ArgumentParser) -> None:
-    """Arguments of ``roughwalk evaluate``."""
-    parser.add_argument(
-        "--policy",
-        required=True,
-        help=f"one of {', '.join(BASELINES)}, or the path of a trained model (.zip)",
-    )
-    parser.add_argument("--env", help="env id (default for a trained model: its training env)")
-    parser.add_argument(
-        "--env-kwargs", nargs="*", metavar="KEY=VALUE", help="env keyword arguments (YAML values)"
-    )
-    parser.add_argument("--episodes", type=int, default=20, help="number of episodes")
-    parser.add_argument(
-        "--seed",
-        type=int,
-        default=TEST_SEED,
-        help=f"episode k uses reset seed 1,000,000 + SEED + k (default {TEST_SEED})",
-    )
-    parser.add_argument("--vecnormalize", help="VecNormalize statistics (default: beside model)")
-    parser.add_argument("--json", metavar="FILE", help="write summary and episodes as JSON")
-    parser.add_argument("--csv", metavar="FILE", help="write one row per episode as CSV")
-    parser.add_argument(
-        "--plot-learning-curve",
-        nargs="?",
-        const="",
-        metavar="PNG",
-        help="plot the trained model's learning curve (default: learning_curve.png in its run)",
-    )
-    parser.add_argument("--no-progress", action="store_true", help="no progress bar")
-
-
-def run(args: argparse.Namespace) -> int:
-    """``roughwalk evaluate``."""
-    if args.policy not in BASELINES:
-        from agents.train import set_threads
-
-        set_threads(1)
-    try:
-        kwargs = parse_assignments(args.env_kwargs) if args.env_kwargs else None
-        ev = evaluate(
-            args.policy,
-            args.env,
-            episodes=args.episodes,
-            seed=args.seed,
-            env_kwargs=kwargs,
-            vecnormalize=args.vecnormalize,
-            progress=not args.no_progress,
-        )
-    except (ConfigError, ValueError, FileNotFoundError) as exc:
-        print(f"roughwalk evaluate: error: {exc}")
-        return 2
-    seeds = f"{ev.episodes[0].seed}-{ev.episodes[-1].seed}"
-    print_table([ev], title=f"{ev.policy} on {ev.env_id}, held-out seeds {seeds}")
-    if args.json:
-        write_json([ev], args.json)
-    if args.csv:
-        write_csv([ev], args.csv)
-    if args.plot_learning_curve is not None:
-        if args.policy in BASELINES:
-            print("roughwalk evaluate: error: --plot-learning-curve needs a trained model")
-            return 2
-        from agents.policies import find_manifest
-
-        manifest = find_manifest(args.policy)
-        run_dir = manifest.parent if manifest else Path(args.policy).parent
-        out = args.plot_learning_curve or run_dir / "learning_curve.png"
-        print(f"learning curve: {plot_learning_curve(run_dir, out)}")
-    return 0

@@ -145,7 +145,8 @@ class ResidualWrapper(gym.Wrapper, gym.utils.RecordConstructorArgs):
     def reset(
         self, *, seed: int | None = None, options: dict[str, Any] | None = None
     ) -> tuple[Any, dict[str, Any]]:
-        """Reset the env, then the base policy (which may read the new course from the env)."""
+        """Reset the env with ``seed`` and ``options``, then the base policy (which may read
+        the new course from the env)."""
         obs, info = self.env.reset(seed=seed, options=options)
         self.base_policy.reset()
         self._base = self._base_command(obs)

@@ -30,6 +30,8 @@ from stable_baselines3.common.vec_env.base_vec_env import (
     VecEnvStepReturn,
 )
 
+import envs  # noqa: F401  (registers the roughwalk ids)
+
 
 class SB3VecEnv(VecEnv):
     """stable-baselines3 ``VecEnv`` view of a Gymnasium vector env in same-step autoreset mode.
@@ -129,6 +131,8 @@ class SB3VecEnv(VecEnv):
     def env_is_wrapped(
         self, wrapper_class: type[gym.Wrapper], indices: VecEnvIndices = None
     ) -> list[bool]:
+        """False for every sub-env of ``indices``: the vector env's sub-envs are not Gymnasium
+        envs, so no ``wrapper_class`` wraps them."""
         return [False for _ in self._get_indices(indices)]
 
     def _get_indices(self, indices: VecEnvIndices) -> Iterable[int]:
@@ -163,13 +167,12 @@ def make_sb3_vec_env(
     info_every_step: bool = False,
     **env_kwargs: Any,
 ) -> SB3VecEnv:
-    """SB3 ``VecEnv`` of ``n_envs`` copies of a roughwalk env on the native vector env.
+    """SB3 ``VecEnv`` of ``n_envs`` copies of the roughwalk env ``env_id`` on the native
+    vector env.
 
     Sub-env ``i`` is seeded with ``seed + i`` at the first ``reset()``. ``env_kwargs`` go to
-    the env (as for ``gym.make``).
+    the env (as for ``gym.make``); ``info_every_step`` as for :class:`SB3VecEnv`.
     """
-    import envs  # noqa: F401  (registers the roughwalk ids)
-
     venv = gym.make_vec(
         env_id,
         num_envs=n_envs,

@@ -1,7 +1,6 @@
-"""Train an RL agent (stable-baselines3 PPO or SAC, from scratch or residual) from a config.
+"""Training an RL agent (stable-baselines3 PPO or SAC, from scratch or residual) from a config.
 
-``roughwalk train configs/agents/ppo_rough.yaml`` writes a run directory
-``<log-dir>/<config name>_s<seed>/`` holding:
+:func:`train` writes a run directory ``<log_dir>/<config name>_s<seed>/`` holding:
 
 - ``manifest.json``: the resolved config, every seed used (training envs, evaluation courses),
   library versions, the command line, start/finish times and any resumes;
@@ -13,20 +12,20 @@
 
 Training env ``i`` is seeded with ``seed + i`` (below 1,000,000); the periodic evaluation
 resets its env with the fixed seeds ``1,000,000 + eval_seed + k`` before every evaluation, so
-all evaluations use the same held-out courses. ``--resume CHECKPOINT`` continues a run from a
-checkpoint (model, VecNormalize statistics and, if saved, the replay buffer) up to the config's
-``n_timesteps``.
+all evaluations use the same held-out courses. ``train(cfg, resume=checkpoint)`` continues a
+run from a checkpoint (model, VecNormalize statistics and, if saved, the replay buffer) up to
+the config's ``n_timesteps``.
 """
 
 from __future__ import annotations
 
-import argparse
 import datetime as _dt
 import functools
 import json
 import platform
 import re
 import sys
+from importlib.metadata import version
 from pathlib import Path
 from typing import Any
 
@@ -34,14 +33,9 @@ import gymnasium as gym
 import numpy as np
 import yaml
 
-from agents.config import (
-    EVAL_SEED_OFFSET,
-    AgentConfig,
-    ConfigError,
-    load_config,
-    parse_assignments,
-)
-from agents.policies import MANIFEST, find_manifest, find_vecnormalize
+import envs  # noqa: F401  (registers the roughwalk ids, also in subprocesses)
+from agents.config import EVAL_SEED_OFFSET, AgentConfig
+from agents.runs import MANIFEST, find_manifest, find_vecnormalize
 
 
 def _now() -> str:
@@ -61,8 +55,6 @@ def versions() -> dict[str, str]:
         "torch": torch.__version__,
     }
     try:
-        from importlib.metadata import version
-
         out["roughwalk"] = version("roughwalk")
     except Exception:  # noqa: BLE001  (not installed as a distribution)
         pass
@@ -70,9 +62,7 @@ def versions() -> dict[str, str]:
 
 
 def _make_env(env_id: str, **kwargs: Any) -> gym.Env:
-    """``gym.make`` after registering the roughwalk ids (also in subprocesses)."""
-    import envs  # noqa: F401
-
+    """``gym.make`` of a roughwalk id (module-level, so that subprocesses can unpickle it)."""
     return gym.make(env_id, **kwargs)
 
 
@@ -92,12 +82,11 @@ def make_vec_env(
     from stable_baselines3.common.env_util import make_vec_env as sb3_make_vec_env
     from stable_baselines3.common.vec_env import DummyVecEnv, SubprocVecEnv, VecMonitor
 
-    import envs  # noqa: F401  (registers the ids)
+    # the adapter subclasses SB3's VecEnv: imported with SB3, not with this module
+    from agents.sb3_vec_env import make_sb3_vec_env
 
     kind = vec_env or cfg.vec_env
     if kind == "native":
-        from agents.sb3_vec_env import make_sb3_vec_env
-
         venv = make_sb3_vec_env(cfg.env_id, n_envs=n_envs, seed=seed, **cfg.env_kwargs)
         if monitor_dir is not None:
             monitor_dir.mkdir(parents=True, exist_ok=True)
@@ -119,6 +108,7 @@ def make_callbacks(cfg: AgentConfig, run_dir: Path, eval_env: Any) -> list:
     """Checkpoints (with VecNormalize statistics) and held-out periodic evaluation."""
     from stable_baselines3.common.callbacks import CheckpointCallback
 
+    # the callbacks subclass SB3's: imported with SB3, not with this module
     from agents.callbacks import HeldOutEvalCallback, SaveVecNormalizeOnBest
 
     callbacks: list = []
@@ -150,7 +140,7 @@ def make_callbacks(cfg: AgentConfig, run_dir: Path, eval_env: Any) -> list:
 
 def _restore_evaluations(callbacks: list, run_dir: Path, up_to: int) -> None:
     """Give a resumed run's evaluation callback the evaluations made up to the checkpoint."""
-    from agents.callbacks import HeldOutEvalCallback
+    from agents.callbacks import HeldOutEvalCallback  # with SB3, as in make_callbacks
 
     path = run_dir / "eval" / "evaluations.npz"
     if not path.is_file():
@@ -177,7 +167,7 @@ def set_threads(threads: int | None) -> None:
 
 
 def run_dir_for(cfg: AgentConfig, log_dir: str | Path) -> Path:
-    """``<log_dir>/<config name>_s<seed>``."""
+    """The run directory of ``cfg`` in ``log_dir``: ``<log_dir>/<config name>_s<seed>``."""
     return Path(log_dir) / f"{cfg.name}_s{cfg.seed}"
 
 
@@ -201,8 +191,13 @@ def build(
 ) -> tuple[Any, Any, Any]:
     """The model, its training VecEnv and the evaluation VecEnv (None without evaluation).
 
-    From scratch, or from checkpoint ``resume`` with its VecNormalize statistics and, if saved,
-    its replay buffer.
+    Args:
+        cfg: the agent config.
+        run_dir: the run directory (monitor logs, TensorBoard logs).
+        resume: build from this checkpoint, with its VecNormalize statistics and, if saved,
+            its replay buffer (default: from scratch).
+        tensorboard: write TensorBoard logs (if tensorboard is installed).
+        verbose: SB3 verbosity (0, 1, 2).
     """
     from stable_baselines3.common.vec_env import VecFrameStack, VecNormalize
 
@@ -287,8 +282,15 @@ def train(
 ) -> Path:
     """Train the agent of ``cfg``; returns the run directory (layout in the module docstring).
 
-    ``threads``: torch threads (None: torch's default). One is fastest for these small
-    networks: on 2 busy cores, two threads made PPO more than ten times slower.
+    Args:
+        cfg: the agent config.
+        log_dir: folder of the runs; None with ``resume``: the checkpoint's run.
+        resume: continue from this checkpoint ``.zip`` up to the config's ``n_timesteps``.
+        progress_bar: show SB3's progress bar.
+        verbose: SB3 verbosity (0, 1, 2).
+        tensorboard: write TensorBoard logs (if tensorboard is installed).
+        threads: torch threads (None: torch's default). One is fastest for these small
+            networks: on 2 busy cores, two threads made PPO more than ten times slower.
     """
     set_threads(threads)
     resume_path = Path(resume) if resume else None
@@ -361,49 +363,3 @@ def train(
     manifest["num_timesteps"] = int(model.num_timesteps)
     manifest_file.write_text(json.dumps(manifest, indent=2) + "\n")
     return run_dir
-
-
-def configure(parser: argparse.ArgumentParser) -> None:
-    """Arguments of ``roughwalk train``."""
-    parser.add_argument("config", help="agent config (configs/agents/*.yaml)")
-    parser.add_argument("--timesteps", type=int, help="override n_timesteps")
-    parser.add_argument("--seed", type=int, help="override run.seed (training seed)")
-    parser.add_argument("--resume", metavar="CHECKPOINT", help="continue from a checkpoint .zip")
-    parser.add_argument(
-        "--log-dir",
-        help="directory of runs (default: runs/; with --resume: the checkpoint's run)",
-    )
-    parser.add_argument(
-        "--hyperparams",
-        "-params",
-        nargs="*",
-        metavar="KEY=VALUE",
-        help="override hyperparameters (YAML values), as rl-zoo3's -params",
-    )
-    parser.add_argument("--no-progress", action="store_true", help="no progress bar")
-    parser.add_argument("--verbose", type=int, default=0, help="SB3 verbosity (0, 1, 2)")
-    parser.add_argument("--threads", type=int, default=1, help="torch threads (default 1)")
-
-
-def run(args: argparse.Namespace) -> int:
-    """``roughwalk train``."""
-    try:
-        overrides = parse_assignments(args.hyperparams)
-        if args.timesteps is not None:
-            overrides["n_timesteps"] = args.timesteps
-        run_overrides = {"seed": args.seed} if args.seed is not None else None
-        cfg = load_config(args.config, overrides, run_overrides)
-        log_dir = args.log_dir if (args.log_dir or args.resume) else "runs"
-        run_dir = train(
-            cfg,
-            log_dir=log_dir,
-            resume=args.resume,
-            progress_bar=not args.no_progress,
-            verbose=args.verbose,
-            threads=args.threads,
-        )
-    except (ConfigError, FileNotFoundError, ValueError) as exc:
-        print(f"roughwalk train: error: {exc}")
-        return 2
-    print(f"run saved in {run_dir}")
-    return 0

@@ -79,11 +79,13 @@ class EstimatedStateObservation(gym.Wrapper, gym.utils.RecordConstructorArgs):
     def reset(
         self, *, seed: int | None = None, options: dict[str, Any] | None = None
     ) -> tuple[np.ndarray, dict[str, Any]]:
+        """Reset the env with ``seed`` and ``options``, and the estimator."""
         obs, info = self.env.reset(seed=seed, options=options)
         self.estimator.reset()
         return self._observe(obs, 0.0), info
 
     def step(self, action: Any) -> tuple[np.ndarray, float, bool, bool, dict[str, Any]]:
+        """Step the env with ``action``; the estimator is fed the command applied."""
         a = np.asarray(action, dtype=np.float64).reshape(-1)
         obs, reward, terminated, truncated, info = self.env.step(action)
         # the env has checked the action (finite); it applies it clipped to [-1, 1]

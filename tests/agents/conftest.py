@@ -8,6 +8,7 @@ import pytest
 import torch
 
 from agents.config import AgentConfig, load_config
+from agents.train import train
 
 CONFIG_DIR = Path(__file__).resolve().parents[2] / "configs" / "agents"
 CONFIGS = sorted(CONFIG_DIR.glob("*.yaml"))
@@ -53,7 +54,5 @@ def smoke():
 @pytest.fixture(scope="session")
 def trained_ppo_run(tmp_path_factory: pytest.TempPathFactory) -> Path:
     """A tiny PPO run on flat ground (from scratch), trained once per session."""
-    from agents.train import train
-
     cfg = smoke_config(CONFIG_DIR / "ppo_flat.yaml")
     return train(cfg, log_dir=tmp_path_factory.mktemp("runs"), progress_bar=False)

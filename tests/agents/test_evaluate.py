@@ -11,9 +11,16 @@ import numpy as np
 import pytest
 
 import envs  # noqa: F401
-from agents.cli import main
 from agents.config import EVAL_SEED_OFFSET, TEST_SEED, TRAIN_SEED_LIMIT
-from agents.evaluate import Evaluation, eval_seeds, evaluate, run_episode, write_csv, write_json
+from agents.evaluate import (
+    Evaluation,
+    eval_seeds,
+    evaluate,
+    plot_learning_curve,
+    run_episode,
+    write_csv,
+    write_json,
+)
 from agents.policies import ZeroPolicy
 
 SLOPE = "roughwalk/CompassGaitSlope-v0"
@@ -106,24 +113,9 @@ def test_json_and_csv_outputs(tmp_path: Path):
     assert float(rows[0]["distance"]) == pytest.approx(ev.episodes[0].distance)
 
 
-def test_cli_evaluate(tmp_path: Path, capsys):
-    out = tmp_path / "e.json"
-    argv = ["evaluate", "--policy", "passive", "--env", SLOPE, "--episodes", "2"]
-    assert main([*argv, "--seed", "3", "--json", str(out), "--no-progress"]) == 0
-    printed = capsys.readouterr().out
-    assert "success" in printed and "100%" in printed
-    assert json.loads(out.read_text())["episodes"][0]["seed"] == EVAL_SEED_OFFSET + 3
-    assert main(["evaluate", "--policy", "passive", "--env", "roughwalk/Nope-v0"]) == 2
-    assert "unknown environment id" in capsys.readouterr().out
-    assert main(["evaluate", "--policy", str(tmp_path / "missing.zip"), "--env", FLAT]) == 2
-    assert "model file not found" in capsys.readouterr().out
-
-
 def test_trained_model_evaluation_and_learning_curve(trained_ppo_run: Path, tmp_path: Path):
     model = trained_ppo_run / "model.zip"
-    png = tmp_path / "curve.png"
-    argv = ["evaluate", "--policy", str(model), "--episodes", "2", "--no-progress"]
-    assert main([*argv, "--csv", str(tmp_path / "m.csv"), "--plot-learning-curve", str(png)]) == 0
+    png = plot_learning_curve(trained_ppo_run, tmp_path / "curve.png")
     assert png.is_file() and png.stat().st_size > 5000
     # the env defaults to the run's (with its smoke-test time limit)
     ev = evaluate(str(model), None, episodes=2, seed=0)
@@ -132,54 +124,3 @@ def test_trained_model_evaluation_and_learning_curve(trained_ppo_run: Path, tmp_
     # a checkpoint is evaluated with its own normalisation statistics
     ckpt = next((trained_ppo_run / "checkpoints").glob("rl_model_*_steps.zip"))
     evaluate(str(ckpt), None, episodes=1, seed=0)
-
-
-def test_compare_dry_run_lists_every_row(capsys):
-    assert main(["compare", "--dry-run"]) == 0
-    table = capsys.readouterr().out
-    lines = [ln for ln in table.splitlines() if ln.startswith("| ") and "---" not in ln][1:]
-    # 4 terrain settings x (3 baselines + 4 agents)
-    assert len(lines) == 4 * 7
-    assert "roughwalk train" in table and "--env-kwargs difficulty=2.0" in table
-    assert main(["compare", "--dry-run", "--terrains", "stairs", "rough-hard"]) == 0
-    table = capsys.readouterr().out
-    lines = [ln for ln in table.splitlines() if ln.startswith("| ") and "---" not in ln][1:]
-    assert len(lines) == 2 * 7 and {ln.split("|")[1].strip() for ln in lines} == {
-        "stairs",
-        "rough-hard",
-    }
-
-
-def test_compare_trains_evaluates_and_writes_the_table(tmp_path: Path):
-    from agents.compare import SETTINGS, compare
-
-    tiny = {"n_timesteps": 256, "n_envs": 2, "n_steps": 64, "batch_size": 64, "n_epochs": 1}
-    rows = compare(
-        log_dir=tmp_path / "runs",
-        out=tmp_path / "results",
-        episodes=2,
-        only="ppo_flat",
-        baselines=("passive",),
-        settings=SETTINGS[:1],
-        hyperparams=tiny,
-        progress=False,
-    )
-    assert [(r["setting"], r["policy"]) for r in rows] == [("flat", "passive"), ("flat", "PPO")]
-    assert rows[1]["budget"].startswith("256 steps")
-    # no periodic evaluation within 256 steps: the final model is the one evaluated
-    assert str(tmp_path / "runs" / "ppo_flat_s0" / "model.zip") in rows[1]["command"]
-    assert (tmp_path / "runs" / "ppo_flat_s0" / "model.zip").is_file()
-    table = (tmp_path / "results" / "compare.md").read_text()
-    assert "| flat | PPO |" in table and "ppo_flat.yaml --log-dir" in table
-    data = json.loads((tmp_path / "results" / "compare.json").read_text())
-    assert len(data["evaluations"]) == 2
-    assert all(len(e["episodes"]) == 2 for e in data["evaluations"])
-
-
-def test_compare_reports_the_validation_best_model_when_there_is_one(tmp_path: Path):
-    from agents.compare import chosen_model
-
-    (tmp_path / "model.zip").write_text("final")
-    assert chosen_model(tmp_path) == tmp_path / "model.zip"
-    (tmp_path / "best_model.zip").write_text("best on the validation courses")
-    assert chosen_model(tmp_path) == tmp_path / "best_model.zip"

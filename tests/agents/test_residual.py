@@ -9,8 +9,10 @@ from gymnasium.utils.env_checker import check_env
 from stable_baselines3.common.env_util import make_vec_env
 from stable_baselines3.common.vec_env import VecNormalize
 
+import controllers
 import envs  # noqa: F401
 from agents.residual import ResidualWrapper
+from agents.sb3_vec_env import SB3VecEnv
 
 FLAT = "roughwalk/CompassGaitFlat-v0"
 
@@ -143,8 +145,6 @@ def test_works_in_sb3_vec_env_under_vecnormalize():
 
 
 def test_zero_residual_reproduces_the_reference_controller_exactly():
-    import controllers
-
     env_id = "roughwalk/CompassGaitRough-v0"
     direct_env = gym.make(env_id)
     reference = controllers.make_reference_policy(direct_env)
@@ -161,8 +161,6 @@ def test_zero_residual_reproduces_the_reference_controller_exactly():
 
 
 def test_works_with_the_vector_env_adapter_under_vecnormalize():
-    from agents.sb3_vec_env import SB3VecEnv
-
     bases: list[HipPD] = []
 
     def make():

@@ -11,10 +11,11 @@ import numpy as np
 import pytest
 from stable_baselines3.common.vec_env import VecNormalize
 
-from agents.cli import main
-from agents.config import EVAL_SEED_OFFSET, TRAIN_SEED_LIMIT, load_config
-from agents.policies import TrainedPolicy, find_vecnormalize, load_vecnormalize
+from agents.config import EVAL_SEED_OFFSET, TRAIN_SEED_LIMIT, ConfigError, load_config
+from agents.evaluate import evaluate
+from agents.runs import find_vecnormalize, load_vecnormalize
 from agents.train import build, save, train
+from agents.trained import TrainedPolicy
 
 CONFIG_DIR = Path(__file__).resolve().parents[2] / "configs" / "agents"
 CONFIGS = sorted(CONFIG_DIR.glob("*.yaml"))
@@ -124,20 +125,6 @@ def test_periodic_evaluation_uses_the_same_held_out_courses(smoke, tmp_path: Pat
     assert len(set(results[0])) > 1  # three different courses, not one course three times
 
 
-def test_cli_train_with_overrides(tmp_path: Path, capsys):
-    cfg = CONFIG_DIR / "sac_flat.yaml"
-    argv = ["train", str(cfg), "--timesteps", "600", "--seed", "4", "--log-dir", str(tmp_path)]
-    argv += ["--no-progress", "--hyperparams", "n_envs=2", "learning_starts=200"]
-    argv += ["batch_size=32", "train_freq=16", "env_kwargs={max_episode_steps: 100}"]
-    assert main(argv) == 0
-    run = tmp_path / "sac_flat_s4"
-    assert str(run) in capsys.readouterr().out
-    manifest = json.loads((run / "manifest.json").read_text())
-    assert manifest["seeds"]["training_envs"] == [4, 5]
-    assert manifest["num_timesteps"] >= 600  # whole vec-env steps: SB3 may overshoot by n_envs
-    assert load_config(cfg).n_timesteps > 600  # the file itself is untouched
-
-
 def test_rl_zoo3_reads_our_configs(tmp_path: Path):
     pytest.importorskip("rl_zoo3")
     cmd = [sys.executable, "-m", "rl_zoo3.train", "--algo", "ppo"]
@@ -152,8 +139,6 @@ def test_rl_zoo3_reads_our_configs(tmp_path: Path):
     assert len(saved) == 1
     assert list(tmp_path.rglob("vecnormalize.pkl"))
     # and roughwalk evaluate reads the model with rl-zoo3's saved settings
-    from agents.evaluate import evaluate
-
     ev = evaluate(str(saved[0]), None, episodes=1, seed=0, env_kwargs={"max_episode_steps": 50})
     assert ev.env_id == "roughwalk/CompassGaitRough-v0" and ev.episodes[0].steps <= 50
 
@@ -170,8 +155,6 @@ def test_other_vectorisations(name: str, kind: str, smoke, tmp_path: Path):
 
 
 def test_native_vec_env_refuses_env_wrappers():
-    from agents.config import ConfigError
-
     with pytest.raises(ConfigError, match="run.vec_env = 'native' cannot apply env_wrapper"):
         load_config(CONFIG_DIR / "sac_residual_rough.yaml", run_overrides={"vec_env": "native"})
 

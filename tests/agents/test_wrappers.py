@@ -9,7 +9,7 @@ from stable_baselines3.common.env_checker import check_env
 
 import envs  # noqa: F401  (registers the ids)
 from agents.residual import ResidualWrapper
-from agents.wrappers import VELOCITY_LIMIT, EstimatedStateObservation
+from agents.wrappers import VELOCITY_LIMIT, EstimatedStateObservation, estimate_features
 
 SETTLED = 20  # control periods (0.1 s = 5 observer time constants)
 
@@ -81,4 +81,16 @@ def test_estimate_observation_needs_an_estimator_and_sensors():
         )
     with pytest.raises(ValueError, match="sensor observation"):
         EstimatedStateObservation(gym.make("roughwalk/CompassGaitFlat-v0", observation="state"))
-    assert VELOCITY_LIMIT > 10.0
+
+
+def test_estimated_velocities_are_clipped_to_the_observation_bounds():
+    class Estimate:  # an estimator's state after a blow-up: velocities far out of range
+        x = np.array([0.3, -0.2, 1e3, -2e3])
+        stance_leg = 1
+
+    features = estimate_features(Estimate())
+    np.testing.assert_array_equal(features, [0.3, -0.2, VELOCITY_LIMIT, -VELOCITY_LIMIT, 1.0])
+    space = EstimatedStateObservation(gym.make("roughwalk/CompassGaitFlat-v0")).observation_space
+    np.testing.assert_array_equal(space.high[2:4], [VELOCITY_LIMIT, VELOCITY_LIMIT])
+    np.testing.assert_array_equal(space.low[2:4], [-VELOCITY_LIMIT, -VELOCITY_LIMIT])
+    assert space.contains(np.r_[features, np.zeros(space.shape[0] - 5)].astype(np.float32))

@@ -22,10 +22,17 @@ import math
 from pathlib import Path
 from typing import Any
 
+import gymnasium as gym
 import numpy as np
+from rich.console import Console
+from rich.table import Table
+
+from controllers import ControllerConfig, make_reference_policy
+from envs import model
 
 
 def configure(parser: argparse.ArgumentParser) -> None:
+    """Add the arguments of ``roughwalk demo`` to ``parser``."""
     parser.add_argument(
         "--env", default="roughwalk/CompassGaitStairs-v0", help="environment id (the paper's)"
     )
@@ -46,11 +53,6 @@ def rollout(
 ) -> dict[str, Any]:
     """Run the reference policy on ``env_id``; returns the policy's history, the true states,
     stance feet and legs per tick, the records, the failure (or None) and optional frames."""
-    import gymnasium as gym
-
-    import envs  # noqa: F401  (registers the ids)
-    from controllers import ControllerConfig, make_reference_policy
-
     env = gym.make(env_id, render_mode="rgb_array" if frames else None)
     policy = make_reference_policy(
         env, config=ControllerConfig(horizon=horizon), record_history=True
@@ -118,8 +120,6 @@ def figures(res: dict[str, Any], out: Path) -> list[Path]:
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
-
-    from envs import model
 
     out.mkdir(parents=True, exist_ok=True)
     P = res["robot"].vector()
@@ -211,9 +211,8 @@ def write_gif(frames: list[np.ndarray], path: Path, dt: float, every: int = 4) -
 
 
 def run(args: argparse.Namespace) -> int:
-    from rich.console import Console
-    from rich.table import Table
-
+    """``roughwalk demo`` with the parsed ``args``: the table, the figures; returns the exit
+    status (1 if the walker failed)."""
     console = Console()
     if not (math.isfinite(args.duration) and args.duration > 0):
         raise SystemExit("--duration must be > 0 s")

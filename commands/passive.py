@@ -12,12 +12,18 @@ import argparse
 import math
 
 import numpy as np
+from rich.console import Console
+from rich.table import Table
+
+from envs import RobotParams, SimConfig, Terrain, simulate
+from envs.simulator import passive_limit_cycle, slope_section_state
 
 # starting guess for Newton: the classic walker's cycle on a 0.0525 rad slope (q2, q1d, q2d)
-_GUESS = (-0.218775, 1.092867 - 0.376135, 1.092867)
+CYCLE_GUESS = (-0.218775, 1.092867 - 0.376135, 1.092867)
 
 
 def configure(parser: argparse.ArgumentParser) -> None:
+    """Add the arguments of ``roughwalk passive`` to ``parser``."""
     parser.add_argument("--steps", type=int, default=20, help="number of steps to walk")
     parser.add_argument(
         "--slope", type=float, default=0.0525, help="downhill slope angle [rad] (default 0.0525)"
@@ -33,12 +39,8 @@ def configure(parser: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from rich.console import Console
-    from rich.table import Table
-
-    from envs import RobotParams, SimConfig, Terrain, simulate
-    from envs.simulator import passive_limit_cycle, slope_section_state
-
+    """``roughwalk passive`` with the parsed ``args``: the cycle, one row per step; returns the
+    exit status (1 if no cycle was found or the walker failed)."""
     console = Console()
     if args.steps < 1:
         raise SystemExit("--steps must be >= 1")
@@ -49,7 +51,7 @@ def run(args: argparse.Namespace) -> int:
     params = RobotParams.from_preset(args.robot)
     gamma = -args.slope
     try:
-        cycle = passive_limit_cycle(params, gamma, _GUESS)
+        cycle = passive_limit_cycle(params, gamma, CYCLE_GUESS)
     except RuntimeError as exc:
         console.print(
             f"[red]no passive limit cycle found for {args.robot} on {args.slope} rad: {exc}"

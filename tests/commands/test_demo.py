@@ -2,8 +2,8 @@
 
 import argparse
 
-from agents import demo
-from agents.cli import main
+from commands import demo
+from commands.cli import main
 
 
 def test_demo_writes_table_and_figures(tmp_path, capsys):

@@ -12,7 +12,24 @@ import os
 import time
 from collections.abc import Callable
 
+import gymnasium as gym
+import numba
 import numpy as np
+from rich.console import Console
+from rich.table import Table
+
+from configs import CONFIG_DIR
+from controllers.controller import (
+    ControllerConfig,
+    TransverseController,
+    feedback_law,
+    horizon_gains,
+    step_models,
+)
+from controllers.observer import HighGainObserver, observer_update
+from controllers.planner import GaitPlanner, PlanningError
+from controllers.policy import ReferencePolicy
+from envs import RobotParams, Simulator, Terrain
 
 Row = tuple[str, str, str]
 Section = Callable[[argparse.Namespace], list[Row]]
@@ -40,10 +57,6 @@ def simulator_section(args: argparse.Namespace) -> list[Row]:
     """Single walker (one Python call per 10 ms step) and a batch of walkers (multi-threaded
     and single-threaded kernels), the classic walker walking passively down a slope. Timings
     are the fastest of repeated runs."""
-    import numba
-
-    from envs import RobotParams, Simulator, Terrain
-
     params, terrain = RobotParams.from_preset("classic"), Terrain.slope(_SLOPE)
     t_min = 0.3 if args.quick else 2.0
     rows: list[Row] = []
@@ -104,10 +117,6 @@ def env_section(args: argparse.Namespace) -> list[Row]:
     native vector env at 1, 64 and ``--walkers`` envs; BipedalWalker-v3 for scale if Box2D is
     installed. Passive walking down the slope (no resets), and random actions on rough terrain
     (falls and resets included)."""
-    import gymnasium as gym
-
-    import envs  # noqa: F401  (registers the ids)
-
     t_min = 0.3 if args.quick else 2.0
     rows: list[Row] = []
     rng = np.random.default_rng(0)
@@ -223,23 +232,11 @@ def env_section(args: argparse.Namespace) -> list[Row]:
     return rows
 
 
-#: benchmark sections, run in order: (title, function)
-
-
 def controller_section(args: argparse.Namespace) -> list[Row]:
     """Transverse controller of the paper robot: one footstep's jump-Riccati solve at h = 3
     (the paper: about 0.5 s in MATLAB) and the linearisation plus solve (flat-ground plan), the
     planner's replanning call (flat, and per footstep of a state-feedback walk over the
     paper's stairs), and one control tick (observer update plus feedback law). Medians."""
-    from controllers.controller import (
-        ControllerConfig,
-        TransverseController,
-        feedback_law,
-        horizon_gains,
-        step_models,
-    )
-    from controllers.observer import HighGainObserver, observer_update
-
     reps = 20 if args.quick else 200
     ctrl = TransverseController("paper", "flat", ControllerConfig(horizon=3, replan=False))
     gait = ctrl.planner.periodic_gait()
@@ -258,9 +255,6 @@ def controller_section(args: argparse.Namespace) -> list[Row]:
         prev = ctrl.planner.plan(ctrl.terrain, (gait.q, gait.qd), (0.0, 0.0), 4, prev)
         plan_t.append(time.perf_counter() - t0)
     # replanning at every footstep of a walk over the paper's stairs (state feedback)
-    from envs.params import CONFIG_DIR
-    from envs.terrain import Terrain
-
     stairs = Terrain.from_yaml(CONFIG_DIR / "terrains" / "paper_stairs.yaml")
     walker = TransverseController("paper", stairs, ControllerConfig(horizon=3))
     out = walker.rollout(gait.q, gait.qd, 8.0 if args.quick else 12.0, dt=0.005)
@@ -298,8 +292,6 @@ def _replanning_walk(planner, terrain, footsteps: int, perturb: bool, seed: int)
     following each plan's first step; with ``perturb`` the next start state is moved off the
     plan (``q1`` by up to 0.01 rad, each velocity by up to 5 %). Returns the solve times after
     the first call [s] and whether all footsteps were planned."""
-    from controllers.planner import PlanningError
-
     rng = np.random.default_rng(seed)
     gait = planner.periodic_gait()
     state, stance, prev, times = (gait.q, gait.qd), (0.0, 0.0), None, []
@@ -323,10 +315,6 @@ def planner_section(args: argparse.Namespace) -> list[Row]:
     footsteps; median over the footsteps of all courses) from the planned post-impact state and
     from a perturbed one, the share of random-block courses planned to the end, and the
     replanning time per footstep of the reference policy walking the rough environment."""
-    from controllers.planner import GaitPlanner
-    from envs.params import CONFIG_DIR
-    from envs.terrain import Terrain
-
     seeds = 2 if args.quick else 8
     courses = {
         "flat": [Terrain.flat()],
@@ -359,11 +347,6 @@ def _closed_loop_replanning(episodes: int) -> Row:
     """Replanning per footstep of the reference policy (sensors, observer, replanning at every
     touchdown) on ``CompassGaitRough-v0`` at difficulty 1, evaluation seeds 1,001,000 on: median
     over the footsteps of ``episodes`` episodes."""
-    import gymnasium as gym
-
-    import envs  # noqa: F401  (registers the environments)
-    from controllers.policy import ReferencePolicy
-
     env = gym.make("roughwalk/CompassGaitRough-v0", difficulty=1.0)
     policy = ReferencePolicy(env)
     times: list[float] = []
@@ -384,6 +367,7 @@ def _closed_loop_replanning(episodes: int) -> Row:
     )
 
 
+#: benchmark sections, run in order: (title, function)
 SECTIONS: list[tuple[str, Section]] = [
     ("simulator", simulator_section),
     ("environment", env_section),
@@ -393,6 +377,7 @@ SECTIONS: list[tuple[str, Section]] = [
 
 
 def configure(parser: argparse.ArgumentParser) -> None:
+    """Add the arguments of ``roughwalk bench`` to ``parser``."""
     parser.add_argument("--quick", action="store_true", help="short timings (a few seconds)")
     parser.add_argument(
         "--walkers", type=int, default=1024, help="batch size of the batched benchmarks"
@@ -406,9 +391,8 @@ def configure(parser: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from rich.console import Console
-    from rich.table import Table
-
+    """``roughwalk bench`` with the parsed ``args``: run the sections, print one table; returns
+    the exit status."""
     if args.walkers < 1:
         raise SystemExit("--walkers must be >= 1")
     table = Table(title="roughwalk bench" + (" (quick)" if args.quick else ""))

@@ -1,0 +1,76 @@
+"""Run the whole RL-versus-control comparison: baselines and every agent config, one table.
+
+For each terrain setting (flat, the paper's stairs, rough blocks at two difficulty levels) it
+evaluates the baselines (passive, PD, reference controller) and, for every config in
+``configs/agents`` whose env matches the setting, trains the agent (unless its run already has a
+final model) and evaluates it (the best model of the periodic evaluations on the validation
+courses, else the final one; see :func:`chosen_model`), all on the same held-out test seeds.
+It writes ``compare.json`` (every episode), ``compare.csv`` and ``compare.md`` (the summary
+table with the command reproducing each row and the training budget) to ``--out`` and prints
+the table.
+"""
+
+from __future__ import annotations
+
+import argparse
+from pathlib import Path
+
+from agents.compare import CONFIG_DIR, SETTINGS, compare, markdown_table
+from agents.config import TEST_SEED, ConfigError
+from agents.train import set_threads
+from commands.evaluate import print_table
+
+
+def configure(parser: argparse.ArgumentParser) -> None:
+    """Add the arguments of ``roughwalk compare`` to ``parser``."""
+    parser.add_argument("--configs", type=Path, default=CONFIG_DIR, help="agent config folder")
+    parser.add_argument("--only", help="only agent configs whose name contains this")
+    parser.add_argument(
+        "--terrains",
+        nargs="+",
+        choices=[x.name for x in SETTINGS],
+        help="only these terrain settings (default: all)",
+    )
+    parser.add_argument("--log-dir", type=Path, default=Path("runs"), help="runs folder")
+    parser.add_argument("--out", type=Path, default=Path("results"), help="output folder")
+    parser.add_argument("--episodes", type=int, default=50, help="episodes per row")
+    parser.add_argument(
+        "--seed", type=int, default=TEST_SEED, help="held-out seed offset (as evaluate)"
+    )
+    parser.add_argument(
+        "--no-train", action="store_true", help="fail instead of training missing agents"
+    )
+    parser.add_argument(
+        "--dry-run", action="store_true", help="print the table of commands, run nothing"
+    )
+    parser.add_argument("--no-progress", action="store_true", help="no progress bars")
+    parser.add_argument("--threads", type=int, default=1, help="torch threads (default 1)")
+
+
+def run(args: argparse.Namespace) -> int:
+    """``roughwalk compare`` with the parsed ``args``; returns the exit status (2: bad
+    config)."""
+    set_threads(args.threads)
+    try:
+        result = compare(
+            config_dir=args.configs,
+            log_dir=args.log_dir,
+            out=args.out,
+            episodes=args.episodes,
+            seed=args.seed,
+            only=args.only,
+            settings=tuple(x for x in SETTINGS if not args.terrains or x.name in args.terrains),
+            train_missing=not args.no_train,
+            dry_run=args.dry_run,
+            progress=not args.no_progress,
+        )
+    except (ConfigError, FileNotFoundError, ValueError) as exc:
+        print(f"roughwalk compare: error: {exc}")
+        return 2
+    if args.dry_run:
+        print(markdown_table(result.rows), end="")
+    else:
+        title = f"held-out seeds from {args.seed}, {args.episodes} episodes"
+        print_table(result.evaluations, title=title)
+        print(f"results in {args.out}/compare.md, compare.json, compare.csv")
+    return 0
