@@ -455,7 +455,7 @@ class TransverseController:
 
         Args:
             q0, qd0: start state; duration: simulated time [s]; dt: control period [s];
-            steps: stop after this many footsteps; sim_config: :class:`envs.physics.simulator.SimConfig`.
+            steps: stop after this many footsteps; sim_config: :class:`envs.physics.SimConfig`.
 
         Returns:
             dict with ``t, q, qd, u`` per tick, ``impacts`` (times), ``failure`` (None or the

@@ -6,7 +6,7 @@ equations of motion restricted to the constraint reads (control notes, section 2
     alpha(theta) theta_ddot + beta(theta) theta_dot^2 + gamma(theta) = 0,
 
 with ``alpha = M21 phi' + M22``, ``beta theta_dot^2 = M21 phi'' theta_dot^2 + [C(q, qd) qd]_2`` at
-``qd = [phi', 1] theta_dot`` (the Christoffel terms, taken from :func:`envs.physics.model.coriolis`, which
+``qd = [phi', 1] theta_dot`` (the Christoffel terms, from :func:`envs.physics.model.coriolis`, which
 is quadratic in ``qd``) and ``gamma = G2``. Its integral is
 
     theta_dot^2 = psi(theta, theta0) theta_dot0^2 + Gam(theta, theta0).

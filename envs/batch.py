@@ -1,7 +1,7 @@
 """The walkers behind both environments: :class:`WalkerBatch` and its compiled kernels.
 
 A :class:`WalkerBatch` holds ``n`` walkers of one :class:`envs.settings.EnvSettings` on one
-batched :class:`envs.physics.simulator.Simulator`. After every simulator step one compiled call computes
+batched :class:`envs.physics.Simulator`. After every simulator step one compiled call computes
 each walker's reward and episode counters and its observation (rescanning the terrain only when
 the stance foot moved). :class:`envs.CompassGaitEnv` is a batch of one and the vector env a batch
 of ``num_envs``, so both give the same numbers step by step.

@@ -65,7 +65,7 @@ class CompassGaitEnv(gym.Env):
     Mettin, Iida, Tedrake 2011, "Stable Dynamic Walking over Rough Terrain"). The robot walks
     towards +x: each step the swing leg swings forward on a retractable foot and touches down;
     the impact is instantaneous and the legs swap roles. The simulator integrates the swing
-    phase exactly and locates touchdowns to 1e-9 s or better (:mod:`envs.physics.simulator`). Robots:
+    phase exactly and locates touchdowns to 1e-9 s or better (:mod:`envs.physics`). Robots:
     the paper's robot (``"paper"``, legs 0.32 m) and the classic symmetric walker
     (``"classic"``, legs 1 m).
 
@@ -121,7 +121,7 @@ class CompassGaitEnv(gym.Env):
     ## Episode End
 
     Termination: the walker fails (``info["failure"]``: ``"fall"``, ``"trip"``, ``"liftoff"``,
-    ``"slip"``, ``"stuck"`` or ``"invalid"``; see :mod:`envs.physics.simulator`). Truncation: the time
+    ``"slip"``, ``"stuck"`` or ``"invalid"``; see :mod:`envs.physics`). Truncation: the time
     limit of the registered id (``max_episode_steps``, applied by ``gym.make``).
 
     ## Info
@@ -154,7 +154,7 @@ class CompassGaitEnv(gym.Env):
       offset, spacing, range, latency);
     * ``reward``: :class:`envs.task.RewardConfig` fields; ``initial_state``:
       :class:`envs.task.InitialState` fields (nominal state, spread, stance leg); ``simulator``:
-      :class:`envs.physics.simulator.SimConfig` fields.
+      :class:`envs.physics.SimConfig` fields.
 
     ``settings`` (an :class:`envs.settings.EnvSettings`) may replace ``config`` and the
     overrides.

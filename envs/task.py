@@ -24,7 +24,7 @@ from .physics.kernel import O_WABS, O_WNET, O_WPOS
 from .physics.terrain import Terrain
 
 TERRAIN_CONFIG_DIR = CONFIG_DIR / "terrains"
-#: ``reward.work`` kind -> column of :attr:`envs.physics.simulator.StepEvents.work`
+#: ``reward.work`` kind -> column of :attr:`envs.physics.StepEvents.work`
 WORK_COLUMNS: dict[str, int] = {"net": O_WNET, "positive": O_WPOS, "absolute": O_WABS}
 #: entries of :meth:`RewardConfig.weights`
 W_PROGRESS, W_ENERGY, W_FAILURE = range(3)
@@ -70,7 +70,7 @@ class RewardConfig:
 
     @property
     def work_column(self) -> int:
-        """Column of :attr:`envs.physics.simulator.StepEvents.work` holding this reward's motor work."""
+        """Column of :attr:`envs.physics.StepEvents.work` holding this reward's motor work."""
         return WORK_COLUMNS[self.work]
 
 

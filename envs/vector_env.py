@@ -2,7 +2,7 @@
 
 ``gym.make_vec("roughwalk/CompassGaitRough-v0", num_envs=1024,
 vectorization_mode="vector_entry_point")`` builds a :class:`CompassGaitVectorEnv`: all
-sub-environments are walkers of one :class:`envs.physics.simulator.Simulator`, stepped by one compiled
+sub-environments are walkers of one :class:`envs.physics.Simulator`, stepped by one compiled
 call, with rewards and observations computed by one more. Sub-environment ``i`` gives exactly the
 observations, rewards and infos of ``gym.make(id)`` reset with ``seed + i`` and fed the same
 actions (the single env is a batch of one of the same code).

@@ -1,7 +1,7 @@
 """Footholds: the terrain as the planner sees it, the foothold rules, the candidate footholds of
 one step, and the search for chains of admissible footholds over the horizon.
 
-The map is either the true :class:`envs.physics.terrain.Terrain` or heights sampled by a terrain scanner
+The map is either the true :class:`envs.physics.Terrain` or heights sampled by a terrain scanner
 (:meth:`TerrainMap.from_scan`). Footholds keep a margin from vertical faces (stair edges, block
 borders) and kinks, give step lengths within bounds, and lie within the reach of the legs
 (inter-leg angle at touchdown within bounds). A step's candidates are ranked so that those from

@@ -91,7 +91,7 @@ class GaitPlanner:
         """Plan ``horizon`` steps from the post-impact ``state``.
 
         Args:
-            terrain: a :class:`envs.physics.terrain.Terrain`, a spec, a :class:`TerrainMap`, or a scan
+            terrain: a :class:`envs.physics.Terrain`, a spec, a :class:`TerrainMap`, or a scan
                 ``(xs, heights)`` [m].
             state: actual post-impact ``(q, qd)`` [rad, rad/s] (``q2d > 0``).
             stance_foot: stance-foot position ``(x, y)`` [m].

@@ -6,7 +6,7 @@ touchdown located by root finding on the substep length, the impact map of
 :mod:`envs.physics.model`, leg swap, failure checks. The batched kernel
 (:func:`step_parallel`) runs it over walkers with ``numba.prange``; :func:`step_serial` runs
 the same function one walker after the other, so one walker and a batch take the same code path
-and give the same numbers bit for bit. :class:`envs.physics.simulator.Simulator` owns the
+and give the same numbers bit for bit. :class:`envs.physics.Simulator` owns the
 buffers these kernels work on; their layouts are the ``X_*``, ``F_*``, ``E_*``, ``O_*`` and
 ``C_*`` constants below.
 
