@@ -19,16 +19,12 @@ from rich.console import Console
 from rich.table import Table
 
 from configs import CONFIG_DIR
-from controllers.controller import (
-    ControllerConfig,
-    TransverseController,
-    feedback_law,
-    horizon_gains,
-    step_models,
-)
+from controllers.controller import ControllerConfig, TransverseController
+from controllers.feedback import feedback_law
+from controllers.gains import horizon_gains, step_models
 from controllers.observer import HighGainObserver, observer_update
 from controllers.planner import GaitPlanner, PlanningError
-from controllers.policy import ReferencePolicy
+from controllers.reference import ReferencePolicy
 from envs import RobotParams, Simulator, Terrain
 
 Row = tuple[str, str, str]
@@ -188,7 +184,7 @@ def env_section(args: argparse.Namespace) -> list[Row]:
     # the same batch stepped by the bare simulator, right after: the environment's share
     venv = gym.make_vec(slope, args.walkers, vectorization_mode="vector_entry_point")
     venv.reset(seed=0)
-    sim = venv.unwrapped._batch.sim
+    sim = venv.unwrapped.simulator
     torque = np.zeros(args.walkers)
     reps = max(1, 4096 // args.walkers)
 
@@ -262,7 +258,7 @@ def controller_section(args: argparse.Namespace) -> list[Row]:
     obs = HighGainObserver(ctrl.robot, 0.005, 0.02)
     obs.reset(gait.q, gait.qd)
     x, P, n = obs.x, ctrl.P, 20000 if not args.quick else 2000
-    tab, pc, Fv, Fd, K = ctrl._tab, ctrl._pc, ctrl._Fv, ctrl._Fd, ctrl._K
+    tab, pc, Fv, Fd, K = ctrl.gain_table.kernel_args()
     q1, q2 = float(gait.q[0]), float(gait.q[1])
     observer_update(P, x, q1, q2, q1, q2, 0.0, 0.005, 0.02, obs.nsub)
     feedback_law(P, x, tab, pc, Fv, Fd, K)

@@ -28,7 +28,7 @@ from rich.console import Console
 from rich.table import Table
 
 from controllers import ControllerConfig, make_reference_policy
-from envs import model
+from envs.physics import model
 
 
 def configure(parser: argparse.ArgumentParser) -> None:

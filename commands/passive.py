@@ -16,7 +16,7 @@ from rich.console import Console
 from rich.table import Table
 
 from envs import RobotParams, SimConfig, Terrain, simulate
-from envs.simulator import passive_limit_cycle, slope_section_state
+from envs.physics.passive import passive_limit_cycle, slope_section_state
 
 # starting guess for Newton: the classic walker's cycle on a 0.0525 rad slope (q2, q1d, q2d)
 CYCLE_GUESS = (-0.218775, 1.092867 - 0.376135, 1.092867)

@@ -27,8 +27,8 @@ from numpy.polynomial import chebyshev as cheb
 
 from envs.physics import model
 
-# entry-wise functions are compiled like envs.model's: the same code serves numpy arrays (a grid
-# of phases) and scalars inside compiled loops (controllers.planner.kernel)
+# entry-wise functions are compiled like the model's: the same code serves numpy arrays (a grid of
+# phases) and scalars inside compiled loops (controllers.planner.kernel)
 _jit = njit(cache=True, error_model="numpy")
 
 __all__ = [

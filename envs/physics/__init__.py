@@ -8,12 +8,12 @@ Modules: :mod:`~envs.physics.params` (robot parameters and the flat parameter ve
 :mod:`~envs.physics.passive` (the passive limit cycle down a slope).
 """
 
+from . import model
 from .kernel import FAILURES
+from .params import RobotParams, as_params, available_presets
 from .passive import LimitCycle, passive_limit_cycle, slope_section_state, slope_step_map
-from .physics import model
-from .physics.params import RobotParams, as_params, available_presets
-from .physics.simulator import SimConfig, SimResult, Simulator, StepEvents, simulate
-from .physics.terrain import KINDS, Terrain, as_terrain, terrain_height, terrain_slope
+from .simulator import SimConfig, SimResult, Simulator, StepEvents, simulate
+from .terrain import KINDS, Terrain, as_terrain, terrain_height, terrain_slope
 
 __all__ = [
     "FAILURES",

@@ -52,9 +52,9 @@ import os
 import numba
 from numba import njit, prange
 
-from .physics import model
-from .physics.params import PB, PL
-from .physics.terrain import terrain_height, terrain_slope
+from . import model
+from .params import PB, PL
+from .terrain import terrain_height, terrain_slope
 
 # OpenMP worker threads spin while they wait; on a machine whose cores are busy with other
 # processes the batched kernels then ran up to 8x slower than single-threaded. The workqueue

@@ -22,7 +22,7 @@ import math
 import numpy as np
 from numba import njit
 
-from .physics.params import (
+from .params import (
     P1,
     P2,
     P3,

@@ -13,9 +13,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .physics.params import RobotParams
-from .physics.simulator import SimConfig, simulate
-from .physics.terrain import Terrain
+from .params import RobotParams
+from .simulator import SimConfig, simulate
+from .terrain import Terrain
 
 
 @dataclass(frozen=True)

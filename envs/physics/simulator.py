@@ -55,8 +55,8 @@ from .kernel import (
     step_parallel,
     step_serial,
 )
-from .physics.params import N_PARAMS, RobotParams, as_params
-from .physics.terrain import Terrain, as_terrain
+from .params import N_PARAMS, RobotParams, as_params
+from .terrain import Terrain, as_terrain
 
 
 @dataclass(frozen=True)

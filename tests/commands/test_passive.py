@@ -5,7 +5,7 @@ import re
 from commands.cli import main
 from commands.passive import CYCLE_GUESS
 from envs import RobotParams
-from envs.simulator import passive_limit_cycle
+from envs.physics.passive import passive_limit_cycle
 
 
 def test_passive_walk_converges_to_the_limit_cycle(capsys):

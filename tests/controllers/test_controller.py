@@ -6,7 +6,8 @@ import numpy as np
 import pytest
 
 from controllers.controller import ControllerConfig, PDController, TransverseController
-from envs import model, simulate
+from envs import simulate
+from envs.physics import model
 from envs.physics.simulator import Simulator
 from envs.physics.terrain import Terrain
 

@@ -5,7 +5,7 @@ import numpy as np
 import pytest
 
 import envs  # noqa: F401  (registers the ids)
-from controllers import PDPolicy, ReferencePolicy, make_reference_policy, policy
+from controllers import PDPolicy, make_reference_policy
 
 COURSE_END = 1.1  # hip distance [m]: past both stairs and three or more steps on the flat
 
@@ -92,8 +92,3 @@ def test_bad_observations_and_modes_raise():
         policy(obs[:3])
     with pytest.raises(ValueError, match="sensor"):
         make_reference_policy(gym.make("roughwalk/CompassGaitFlat-v0", observation="state"))
-
-
-def test_former_module_name_still_imports():
-    assert policy.ReferencePolicy is ReferencePolicy
-    assert policy.PDPolicy is PDPolicy and policy.make_reference_policy is make_reference_policy

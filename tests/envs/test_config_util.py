@@ -6,10 +6,10 @@ import pytest
 
 from controllers.controller import ControllerConfig
 from controllers.planner import PlannerConfig
-from envs.compass_gait_env import EnvSettings
 from envs.config_util import dataclass_from_mapping
 from envs.physics import RobotParams
 from envs.sensors import SensorConfig
+from envs.settings import EnvSettings
 
 
 @dataclass(frozen=True)
