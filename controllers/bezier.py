@@ -158,12 +158,34 @@ class BezierConstraint:
 
     @staticmethod
     def second_coeff(a0: float, slope: float, theta_plus: float, theta_minus: float, order: int):
-        """``a_1`` that gives ``phi'(theta_plus) = slope`` (impact invariance)."""
+        """``a_1`` that gives ``phi'(theta_plus) = slope`` (impact invariance).
+
+        Args:
+            a0: first coefficient ``a_0`` [rad].
+            slope: wanted ``d phi / d theta`` at ``theta_plus`` [-].
+            theta_plus: phase at the start of the step [rad].
+            theta_minus: phase at the planned impact [rad].
+            order: polynomial order ``M``.
+
+        Returns:
+            The coefficient ``a_1`` [rad].
+        """
         return a0 + slope * (theta_minus - theta_plus) / order
 
     @staticmethod
     def penultimate_coeff(
         a_last: float, slope: float, theta_plus: float, theta_minus: float, order: int
     ):
-        """``a_{M-1}`` that gives ``phi'(theta_minus) = slope``."""
+        """``a_{M-1}`` that gives ``phi'(theta_minus) = slope``.
+
+        Args:
+            a_last: last coefficient ``a_M`` [rad].
+            slope: wanted ``d phi / d theta`` at ``theta_minus`` [-].
+            theta_plus: phase at the start of the step [rad].
+            theta_minus: phase at the planned impact [rad].
+            order: polynomial order ``M``.
+
+        Returns:
+            The coefficient ``a_{M-1}`` [rad].
+        """
         return a_last - slope * (theta_minus - theta_plus) / order

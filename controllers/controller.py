@@ -114,14 +114,16 @@ class ControllerConfig:
 
     @classmethod
     def from_dict(cls, d: dict[str, Any] | None) -> ControllerConfig:
-        """Build from a dict (unknown keys raise ``ValueError``); None gives the defaults."""
+        """Build from a dict ``d`` of the fields (unknown keys raise ``ValueError``); None gives
+        the defaults."""
         if d is None:
             return cls()
         return dataclass_from_mapping(cls, d, "controller")
 
     @classmethod
     def from_yaml(cls, path: str | Path) -> ControllerConfig:
-        """Build from a YAML file of the fields (unknown keys raise ``ValueError``)."""
+        """Build from the YAML file at ``path`` holding the fields (unknown keys raise
+        ``ValueError``)."""
         with open(path) as fh:
             return cls.from_dict(yaml.safe_load(fh) or {})
 
@@ -250,8 +252,9 @@ class TransverseController:
     def on_impact(
         self, q: np.ndarray, qd: np.ndarray, stance_foot: tuple[float, float], t: float = math.nan
     ) -> None:
-        """A touchdown happened: ``(q, qd)`` is the post-impact state, ``stance_foot`` the new
-        stance-foot position [m]. Replans (or advances the fixed plan) and re-solves."""
+        """A touchdown happened: ``(q, qd)`` is the post-impact state [rad, rad/s],
+        ``stance_foot`` the new stance-foot position [m], ``t`` the impact time [s] (NaN if
+        unknown). Replans (or advances the fixed plan) and re-solves."""
         self._stance = (float(stance_foot[0]), float(stance_foot[1]))
         self._start_step(np.asarray(q, float), np.asarray(qd, float), t, first=False)
 
@@ -386,7 +389,8 @@ class TransverseController:
 
     # ------------------------------------------------------------------ control
     def coords(self, q: np.ndarray, qd: np.ndarray) -> np.ndarray:
-        """``x_perp`` of the state relative to the current step (NaN without a plan)."""
+        """``x_perp`` of the state ``(q, qd)`` [rad, rad/s] relative to the current step, shape
+        ``(3,)`` (NaN without a plan)."""
         if self.solution is None:
             return np.full(3, np.nan)
         return self.solution.steps[0].coords(np.r_[q, qd])
@@ -508,6 +512,7 @@ class PDController(TransverseController):
     :class:`TransverseController` (``V`` is reported with ``Z^-1 = I``).
 
     Args:
+        robot, terrain, config, planner: as for :class:`TransverseController`.
         kp: proportional gain [1/s^2], > 0; kd: derivative gain [1/s], > 0 (defaults: a
             critically damped pair with poles at -20 rad/s).
     """

@@ -233,8 +233,13 @@ class CompassGaitEnv(gym.Env):
     def reset(
         self, *, seed: int | None = None, options: dict[str, Any] | None = None
     ) -> tuple[np.ndarray, dict[str, Any]]:
-        """Start an episode (options ``"state"``, ``"terrain"``, ``"stance_leg"``; see the class
-        docstring); returns the observation and the info."""
+        """Start an episode; returns the observation and the info.
+
+        Args:
+            seed: seed of the env's random generator (None: keep the current one, or draw a
+                fresh one on the first reset).
+            options: ``"state"``, ``"terrain"``, ``"stance_leg"`` (see the class docstring).
+        """
         super().reset(seed=seed)
         b = self._batch
         b.reset_walker(0, self.np_random, options)

@@ -137,7 +137,8 @@ class SensorConfig:
 
     @classmethod
     def from_dict(cls, d: dict[str, Any] | SensorConfig | None) -> SensorConfig:
-        """Build from a dict (unknown keys raise ``ValueError``); ``None`` gives the defaults."""
+        """Build from a dict ``d`` of the fields (unknown keys raise ``ValueError``); ``None``
+        gives the defaults and a :class:`SensorConfig` is returned as it is."""
         if d is None:
             return cls()
         return dataclass_from_mapping(cls, d, "sensor")
@@ -168,6 +169,11 @@ class SensorLayout:
     """Named slices of the sensor observation vector; build it with ``SensorLayout(scan_count)``.
 
     Use :meth:`decode` to turn an observation into named readings and paper coordinates.
+
+    Args:
+        scan_count: number of terrain-height readings in the observation.
+        scan_offsets: x offsets [m] of the scan points from the stance foot (empty if unknown;
+            :meth:`from_config` fills them in).
     """
 
     scan_count: int
@@ -200,6 +206,11 @@ class SensorLayout:
 
     def decode(self, obs: np.ndarray, previous_stance: int | None = None) -> dict[str, Any]:
         """Named readings of one observation (or a batch, leading axes kept).
+
+        Args:
+            obs: the observation, shape ``(..., size)``.
+            previous_stance: stance leg (0 = A, 1 = B) kept when the contact switches do not
+                name one (see :func:`stance_from_contacts`); None: leg A.
 
         Returns a dict with ``hip`` and ``leg_a`` (encoder angles [rad]), ``contacts`` (``[A, B]``),
         ``stance_leg`` (0 for leg A, 1 for leg B; see :func:`stance_from_contacts`), ``q``
@@ -249,7 +260,8 @@ def stance_from_contacts(
 def encoders_to_q(
     hip: float | np.ndarray, leg_a: float | np.ndarray, stance_leg: int | np.ndarray
 ) -> tuple[Any, Any]:
-    """Paper coordinates ``(q1, q2)`` [rad] from the two encoder angles and the stance leg.
+    """Paper coordinates ``(q1, q2)`` [rad] from the encoder angles ``hip`` and ``leg_a`` [rad]
+    and the ``stance_leg`` (0 = A, 1 = B; scalars or arrays of one shape).
 
     Leg A in stance (0): ``q1 = hip``, ``q2 = leg_a``; leg B in stance (1): ``q1 = -hip``,
     ``q2 = leg_a - hip``.
@@ -265,7 +277,8 @@ def encoders_to_q(
 def q_to_encoders(
     q1: float | np.ndarray, q2: float | np.ndarray, stance_leg: int | np.ndarray
 ) -> tuple[Any, Any]:
-    """Ideal encoder readings ``(hip, leg_a)`` [rad] for the paper coordinates and stance leg."""
+    """Ideal encoder readings ``(hip, leg_a)`` [rad] for the paper coordinates ``q1``, ``q2``
+    [rad] and the ``stance_leg`` (0 = A, 1 = B; scalars or arrays of one shape)."""
     b = np.asarray(stance_leg) == 1
     hip = np.where(b, -np.asarray(q1), q1)
     leg_a = np.where(b, np.asarray(q2) - np.asarray(q1), q2)

@@ -145,7 +145,16 @@ class CompassGaitVectorEnv(VectorEnv):
         seed: int | list[int | None] | None = None,
         options: dict[str, Any] | None = None,
     ) -> tuple[np.ndarray, dict[str, Any]]:
-        """Reset all sub-envs, or those of ``options["reset_mask"]`` (a bool array)."""
+        """Reset all sub-envs, or those of ``options["reset_mask"]`` (a bool array).
+
+        Args:
+            seed: None (keep each sub-env's generator), an int (sub-env ``i`` gets ``seed + i``)
+                or one seed (or None) per sub-env.
+            options: the single env's reset options, plus ``"reset_mask"``.
+
+        Returns:
+            The observations (one row per sub-env) and the batched info dict.
+        """
         n = self.num_envs
         if seed is None:
             seeds: list[int | None] = [None] * n

@@ -12,9 +12,6 @@ rules:
 - every parameter of a public function or method appears, as a word, in its docstring; the
   parameters of a class's constructor appear in the class docstring or in ``__init__``'s.
   ``self``, ``cls``, ``*args`` and ``**kwargs`` are exempt.
-
-Gaps found when the test was written are listed in ``KNOWN_UNDOCUMENTED``; a listed gap that
-is closed fails :func:`test_known_gaps_are_still_gaps`, so the list only shrinks.
 """
 
 from __future__ import annotations
@@ -29,86 +26,6 @@ import pytest
 import commands
 
 PACKAGES = ("envs", "controllers", "agents", "commands")
-
-# Gaps in the public API when this test was written (all in envs and controllers), as
-# "package.Name" (no docstring) or "package.Name(parameter)" (a parameter its docstring does
-# not name), methods as "package.Class.method". Document the name and remove it here.
-KNOWN_UNDOCUMENTED: set[str] = {
-    # controllers
-    "controllers.BezierConstraint.penultimate_coeff(a_last)",
-    "controllers.BezierConstraint.penultimate_coeff(order)",
-    "controllers.BezierConstraint.penultimate_coeff(theta_plus)",
-    "controllers.BezierConstraint.second_coeff(a0)",
-    "controllers.BezierConstraint.second_coeff(order)",
-    "controllers.BezierConstraint.second_coeff(theta_minus)",
-    "controllers.ControllerConfig.from_dict(d)",
-    "controllers.ControllerConfig.from_yaml",
-    "controllers.ControllerConfig.to_dict",
-    "controllers.GaitPlanner.periodic_gait(step_length)",
-    "controllers.HighGainObserver.q",
-    "controllers.HighGainObserver.qd",
-    "controllers.PDController(config)",
-    "controllers.PDController(planner)",
-    "controllers.PDController(robot)",
-    "controllers.PDController(terrain)",
-    "controllers.PDController.coords(q)",
-    "controllers.PDController.coords(qd)",
-    "controllers.PDController.on_impact(t)",
-    "controllers.PDController.reset(t)",
-    "controllers.Plan.ddphi",
-    "controllers.Plan.dphi",
-    "controllers.Plan.phi",
-    "controllers.Plan.thetadot",
-    "controllers.Plan.thetadot_sq",
-    "controllers.Plan.time(theta)",
-    "controllers.PlannerConfig.for_robot(name)",
-    "controllers.PlannerConfig.from_dict(d)",
-    "controllers.PlannerConfig.from_yaml",
-    "controllers.PlannerConfig.to_dict",
-    "controllers.PlanningError(detail)",
-    "controllers.StepPlan(P)",
-    "controllers.StepPlan.alpha",
-    "controllers.StepPlan.beta",
-    "controllers.StepPlan.coeffs",
-    "controllers.StepPlan.gamma",
-    "controllers.StepPlan.input(theta)",
-    "controllers.StepPlan.theta_minus",
-    "controllers.StepPlan.theta_plus",
-    "controllers.StepPlan.thetadot(theta)",
-    "controllers.StepPlan.thetadot_sq(theta)",
-    "controllers.TransverseController.coords(q)",
-    "controllers.TransverseController.coords(qd)",
-    "controllers.TransverseController.on_impact(t)",
-    "controllers.TransverseController.reset(t)",
-    # envs
-    "envs.CompassGaitVectorEnv.reset(seed)",
-    "envs.RobotParams.from_dict(d)",
-    "envs.RobotParams.from_preset(name)",
-    "envs.RobotParams.from_yaml(path)",
-    "envs.SensorConfig.from_dict(d)",
-    "envs.SensorLayout(scan_offsets)",
-    "envs.SensorLayout.contacts",
-    "envs.SensorLayout.decode(obs)",
-    "envs.SensorLayout.decode(previous_stance)",
-    "envs.SensorLayout.from_config",
-    "envs.SensorLayout.scan",
-    "envs.Simulator.set_params(params)",
-    "envs.Simulator.set_terrain(terrain)",
-    "envs.Terrain(xs)",
-    "envs.Terrain(ys)",
-    "envs.Terrain.from_points(xs)",
-    "envs.Terrain.from_points(ys)",
-    "envs.Terrain.from_yaml(path)",
-    "envs.Terrain.kind",
-    "envs.Terrain.random_piecewise(length)",
-    "envs.Terrain.random_piecewise(seed)",
-    "envs.Terrain.staircase(height)",
-    "envs.Terrain.to_yaml(path)",
-    "envs.encoders_to_q(stance_leg)",
-    "envs.q_to_encoders(q1)",
-    "envs.q_to_encoders(q2)",
-    "envs.q_to_encoders(stance_leg)",
-}
 
 
 def _project_object(obj: object) -> bool:
@@ -205,14 +122,8 @@ API = sorted(public_api(), key=lambda item: item[0])
 
 @pytest.mark.parametrize(("qualname", "obj"), API, ids=[name for name, _ in API])
 def test_public_object_is_documented(qualname: str, obj: object) -> None:
-    found = [g for g in gaps(qualname, obj) if g not in KNOWN_UNDOCUMENTED]
+    found = gaps(qualname, obj)
     assert not found, f"undocumented: {', '.join(found)}"
-
-
-def test_known_gaps_are_still_gaps() -> None:
-    current = {g for qualname, obj in API for g in gaps(qualname, obj)}
-    closed = sorted(KNOWN_UNDOCUMENTED - current)
-    assert not closed, f"documented now (remove from KNOWN_UNDOCUMENTED): {', '.join(closed)}"
 
 
 def test_the_walk_covers_every_package() -> None:

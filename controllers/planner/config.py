@@ -24,7 +24,8 @@ __all__ = ["PlannerConfig", "PlanningError"]
 
 
 class PlanningError(RuntimeError):
-    """No feasible plan: ``step`` (index within the horizon) and the violated ``constraint``."""
+    """No feasible plan: ``step`` (index within the horizon), the violated ``constraint`` and
+    an optional ``detail`` (free text added to the message)."""
 
     def __init__(self, step: int, constraint: str, detail: str = ""):
         self.step = int(step)
@@ -194,13 +195,13 @@ class PlannerConfig:
 
     @classmethod
     def from_dict(cls, d: dict[str, Any]) -> PlannerConfig:
-        """Build from a dict; unknown keys raise ``ValueError``."""
+        """Build from a dict ``d`` of settings; unknown keys raise ``ValueError``."""
         return dataclass_from_mapping(cls, d, "planner")
 
     @classmethod
     def for_robot(cls, name: str, **changes: Any) -> PlannerConfig:
-        """Defaults for a robot preset from ``configs/planner/NAME.yaml`` (built-in defaults if
-        there is no such file), with ``changes`` applied."""
+        """Defaults for the robot preset ``name`` from ``configs/planner/NAME.yaml`` (built-in
+        defaults if there is no such file), with ``changes`` applied."""
         path = CONFIG_DIR / "planner" / f"{name}.yaml"
         d: dict[str, Any] = {}
         if path.exists():
@@ -211,7 +212,8 @@ class PlannerConfig:
 
     @classmethod
     def from_yaml(cls, path: str | Path) -> PlannerConfig:
-        """Build from a YAML file of settings (unknown keys raise ``ValueError``)."""
+        """Build from the YAML file of settings at ``path`` (unknown keys raise
+        ``ValueError``)."""
         with open(path) as fh:
             return cls.from_dict(yaml.safe_load(fh) or {})
 

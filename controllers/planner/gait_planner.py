@@ -59,8 +59,8 @@ class GaitPlanner:
     def periodic_gait(
         self, step_length: float | None = None, speed: float | None = None
     ) -> PeriodicGait:
-        """Periodic gait on flat ground with the given step length [m] and a speed [m/s] as close
-        to ``speed`` as the constraints allow (defaults: the configuration's).
+        """Periodic gait on flat ground with step length ``step_length`` [m] and a speed [m/s] as
+        close to ``speed`` as the constraints allow (defaults: the configuration's).
 
         Raises:
             PlanningError: no feasible periodic gait.

@@ -110,11 +110,12 @@ class StepPlan:
 
     # --- nominal motion
     def thetadot_sq(self, theta: np.ndarray | float) -> np.ndarray | float:
-        """Nominal ``theta_dot^2`` [rad^2/s^2] (``psi theta_dot_plus^2 + Gam``)."""
+        """Nominal ``theta_dot^2`` [rad^2/s^2] (``psi theta_dot_plus^2 + Gam``) at phase
+        ``theta`` [rad]."""
         return self._f(theta)
 
     def thetadot(self, theta: np.ndarray | float) -> np.ndarray | float:
-        """Nominal ``theta_dot`` [rad/s] (> 0 inside the step)."""
+        """Nominal ``theta_dot`` [rad/s] (> 0 inside the step) at phase ``theta`` [rad]."""
         return np.sqrt(np.maximum(self._f(theta), 0.0))
 
     def time(self, theta: np.ndarray | float) -> np.ndarray | float:
@@ -154,7 +155,8 @@ class StepPlan:
         return np.stack([ph, th + 0.0 * ph]), np.stack([dph * thd, thd + 0.0 * dph])
 
     def input(self, theta: np.ndarray | float) -> np.ndarray | float:
-        """Nominal hip input ``u`` [input units] along the step (friction included)."""
+        """Nominal hip input ``u`` [input units] along the step (friction included) at phase
+        ``theta`` [rad]."""
         ph, dph, ddph = self.constraint.derivatives(theta)
         return rd.nominal_input(
             self.P, ph, np.asarray(theta, float), dph, ddph, self.thetadot(theta)
@@ -223,15 +225,15 @@ class Plan:
         return self.steps[j].ddphi(theta)
 
     def thetadot(self, j: int, theta: np.ndarray | float) -> np.ndarray | float:
-        """Nominal ``theta_dot`` of step ``j`` [rad/s]."""
+        """Nominal ``theta_dot`` [rad/s] of step ``j`` at phase ``theta`` [rad]."""
         return self.steps[j].thetadot(theta)
 
     def thetadot_sq(self, j: int, theta: np.ndarray | float) -> np.ndarray | float:
-        """Nominal ``theta_dot^2`` of step ``j`` [rad^2/s^2]."""
+        """Nominal ``theta_dot^2`` [rad^2/s^2] of step ``j`` at phase ``theta`` [rad]."""
         return self.steps[j].thetadot_sq(theta)
 
     def time(self, j: int, theta: np.ndarray | float) -> np.ndarray | float:
-        """Nominal time since the start of step ``j`` [s]."""
+        """Nominal time since the start of step ``j`` [s] at phase ``theta`` [rad]."""
         return self.steps[j].time(theta)
 
     def reduced(self, j: int, theta: np.ndarray | float) -> tuple[Any, Any, Any]:

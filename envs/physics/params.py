@@ -144,18 +144,20 @@ class RobotParams:
 
     @classmethod
     def from_dict(cls, d: dict[str, Any]) -> RobotParams:
-        """Build from a dict; unknown or missing keys raise ``ValueError``."""
+        """Build from a dict ``d`` of the fields (SI units); unknown or missing keys raise
+        ``ValueError``."""
         return dataclass_from_mapping(cls, d, "robot", item="parameter")
 
     @classmethod
     def from_yaml(cls, path: str | Path) -> RobotParams:
-        """Load from a YAML file."""
+        """Load from the YAML file at ``path`` (the fields, SI units)."""
         with open(path) as fh:
             return cls.from_dict(yaml.safe_load(fh))
 
     @classmethod
     def from_preset(cls, name: str) -> RobotParams:
-        """Load a preset from ``configs/robots/NAME.yaml`` (``paper`` or ``classic``, ...)."""
+        """Load the preset ``name`` from ``configs/robots/NAME.yaml`` (``paper`` or ``classic``,
+        ...)."""
         presets = available_presets()
         if name not in presets:
             raise ValueError(f"unknown robot preset {name!r}; available: {presets}")

@@ -238,7 +238,13 @@ class Simulator:
 
     # ------------------------------------------------------------------ set-up
     def set_params(self, params: Any, index: int | None = None) -> None:
-        """Robot parameters for all walkers (``index`` None) or for walker ``index``."""
+        """Robot parameters for all walkers (``index`` None) or for walker ``index``.
+
+        Args:
+            params: a :class:`RobotParams`, preset name or dict; with ``index`` None also a list
+                of them, one per walker.
+            index: the walker, or None for all.
+        """
         idx = range(self.num_walkers) if index is None else [self._index(index)]
         if isinstance(params, (list, tuple)) and index is None:
             if len(params) != self.num_walkers:
@@ -251,7 +257,13 @@ class Simulator:
             self._P[i] = p.vector()
 
     def set_terrain(self, terrain: Any, index: int | None = None) -> None:
-        """Terrain for all walkers (``index`` None) or for walker ``index`` (e.g. on reset)."""
+        """Terrain for all walkers (``index`` None) or for walker ``index`` (e.g. on reset).
+
+        Args:
+            terrain: a :class:`Terrain`, spec dict or kind name; with ``index`` None also a list
+                of them, one per walker.
+            index: the walker, or None for all.
+        """
         idx = range(self.num_walkers) if index is None else [self._index(index)]
         if isinstance(terrain, (list, tuple)) and index is None:
             if len(terrain) != self.num_walkers:

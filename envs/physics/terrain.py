@@ -115,6 +115,11 @@ class Terrain:
     Build one with the kind constructors (:meth:`flat`, :meth:`slope`, :meth:`stairs`,
     :meth:`staircase`, :meth:`random_blocks`, :meth:`random_piecewise`, :meth:`from_points`)
     or from a spec dict with :meth:`from_dict`.
+
+    Args:
+        xs: x of the polyline's vertices [m], non-decreasing (two equal x: a vertical face).
+        ys: heights of the vertices [m], same length as ``xs``.
+        spec: the spec dict that :meth:`to_dict` returns (``{"kind": ..., ...}``).
     """
 
     def __init__(self, xs: Sequence[float], ys: Sequence[float], spec: dict[str, Any]):
@@ -180,7 +185,7 @@ class Terrain:
         cls, start: float, count: int, width: float, rise: float, height: float = 0.0
     ) -> Terrain:
         """``count`` equal stairs of tread ``width`` [m] and ``rise`` [m], the first riser at
-        ``start`` [m]."""
+        ``start`` [m], on ground of ``height`` [m] before it."""
         if int(count) != count or count < 0:
             raise ValueError(f"terrain field 'count' = {count!r}; allowed: integer >= 0")
         w = _finite("width", width)
@@ -243,7 +248,8 @@ class Terrain:
         slope_range: Sequence[float] = (-0.1, 0.1),
     ) -> Terrain:
         """Random piecewise-linear ground: flat up to ``start`` [m], then segments of lengths
-        drawn from ``segment_range`` [m] with slopes (dh/dx) from ``slope_range``; flat after."""
+        drawn from ``segment_range`` [m] with slopes (dh/dx) from ``slope_range`` over ``length``
+        [m]; flat after. Same ``seed``, same terrain."""
         st, ln = _finite("start", start), _finite("length", length)
         if ln < 0:
             raise ValueError(f"terrain field 'length' = {ln}; allowed: >= 0 m")
@@ -320,13 +326,13 @@ class Terrain:
         return t
 
     def to_yaml(self, path: str | Path) -> None:
-        """Write the spec to a YAML file."""
+        """Write the spec (:meth:`to_dict`) to the YAML file at ``path``."""
         with open(path, "w") as fh:
             yaml.safe_dump(self.to_dict(), fh, sort_keys=False)
 
     @classmethod
     def from_yaml(cls, path: str | Path) -> Terrain:
-        """Read a spec from a YAML file."""
+        """Read a spec from the YAML file at ``path`` (see :meth:`from_dict`)."""
         with open(path) as fh:
             return cls.from_dict(yaml.safe_load(fh))
 

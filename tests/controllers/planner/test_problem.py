@@ -60,6 +60,7 @@ def test_constraint_layout_follows_the_table():
         groups = [g for g in CONSTRAINT_GROUPS if periodic or not g.periodic_only]
         assert lay.offsets[0] == 0 and lay.offsets.dtype == np.int64
         assert np.diff(lay.offsets).tolist() == [g.size(n, k, f) for g in groups]
+        # _fields is the named tuple's public list of field names, not a private attribute
         assert lay.columns._fields == tuple(g.name for g in CONSTRAINT_GROUPS)
         for g, first in zip(groups, lay.offsets):
             assert getattr(lay.columns, g.name) == first
