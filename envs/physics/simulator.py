@@ -581,7 +581,8 @@ def simulate(
 
     Args:
         params: robot parameters or a preset name.
-        terrain: a :class:`Terrain`, a spec dict, or a kind name (``"flat"``).
+        terrain: a :class:`Terrain`, a spec dict, or a name (``"flat"``; see
+            :func:`envs.physics.terrain.terrain_spec`).
         q0: start ``(q1, q2)`` [rad]; qd0: start ``(q1d, q2d)`` [rad/s].
         duration: simulated time [s], > 0.
         torque: hip torque [N m] (not limited by ``u_max``): None (passive), a float, or a
