@@ -319,3 +319,21 @@ def test_per_walker_terrain_and_masked_reset():
         sim.reset((0.3, 0.5), (0.0, 0.0), index=0)  # retracted swing foot in the ground
     with pytest.raises(ValueError, match="hip"):
         Simulator(CLASSIC, "flat", 1, config=SimConfig(fall_height=0.9)).reset((0.0, 0.6), (0, 0))
+
+
+def test_foot_geometry_comes_from_each_walkers_robot():
+    # swing foot 0.395 m ahead of the stance foot and 0.04 m above the ground (l = 1 m)
+    q, qd = (0.4, 0.1), (0.0, 0.0)
+    sim = Simulator([CLASSIC, CLASSIC.replace(arm_distance=0.5)], "flat", 2)
+    sim.reset(q, qd)
+    assert sim.armed.tolist() == [1, 0]
+    # full-length swing foot 0.04 m below the ground: retracted by 5 % of l it clears it
+    Simulator(CLASSIC, "flat").reset((0.4, 0.3), qd)
+    with pytest.raises(ValueError, match="retracted swing foot"):
+        Simulator(CLASSIC.replace(retract=0.0), "flat").reset((0.4, 0.3), qd)
+    # the former SimConfig fields name their replacement
+    for key in ("retract", "arm_distance"):
+        with pytest.raises(ValueError, match=rf"SimConfig\.{key} moved.*RobotParams\.{key}"):
+            SimConfig(**{key: 0.1})
+        with pytest.raises(ValueError, match=rf"RobotParams\.{key}"):
+            SimConfig.accurate(**{key: 0.1})
