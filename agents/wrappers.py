@@ -16,6 +16,7 @@ import numpy as np
 from gymnasium import spaces
 
 from controllers.estimator import SensorStateEstimator
+from envs.physics.actuator import input_from_action
 
 VELOCITY_LIMIT = 50.0  # [rad/s]: estimated velocities are clipped to this in the observation
 
@@ -89,5 +90,5 @@ class EstimatedStateObservation(gym.Wrapper, gym.utils.RecordConstructorArgs):
         a = np.asarray(action, dtype=np.float64).reshape(-1)
         obs, reward, terminated, truncated, info = self.env.step(action)
         # the env has checked the action (finite); it applies it clipped to [-1, 1]
-        u = float(np.clip(a[0], -1.0, 1.0)) * self.estimator.u_max
+        u = input_from_action(float(a[0]), self.estimator.u_max)
         return self._observe(obs, u), reward, terminated, truncated, info

@@ -38,11 +38,6 @@ __all__ = ["IMPACT", "START", "TICK", "SensorStateEstimator"]
 #: what :meth:`SensorStateEstimator.update` reports about a tick
 START, TICK, IMPACT = "start", "tick", "impact"
 
-#: a crossing of the ground counts as a touchdown once the full-length swing foot is this far
-#: ahead of the stance foot, fraction of the leg length ``l`` (the simulator's and the
-#: planner's default ``arm_distance``)
-ARM_DISTANCE = 0.1
-
 
 class SensorStateEstimator:
     """Estimated state of a roughwalk env's walker from its sensor observations.
@@ -172,7 +167,9 @@ class SensorStateEstimator:
             xs,
             ys,
             2 * self._nsub_td,
-            ARM_DISTANCE * self.robot.l,
+            # a crossing counts once the full-length swing foot is the robot's arming distance
+            # ahead of the stance foot (the simulator's and the planner's rule)
+            self.robot.arm_distance * self.robot.l,
         )
         if not found:  # take the state at the end of the period as the pre-impact state
             _, tau, xpre, fx = predict_touchdown(

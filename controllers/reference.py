@@ -22,10 +22,13 @@ raises because of the robot's state.
 
 from __future__ import annotations
 
+import math
 from typing import Any
 
 import gymnasium as gym
 import numpy as np
+
+from envs.physics.actuator import action_from_input, input_from_action
 
 from .controller import ControllerConfig, PDController, TransverseController
 from .estimator import IMPACT, START, SensorStateEstimator
@@ -115,11 +118,12 @@ class ReferencePolicy:
     def applied(self, action: Any) -> None:
         """Tell the policy the action actually applied over the current period, when it differs
         from the one it returned (a residual added to it, say): the observer integrates the
-        model with the applied input."""
-        a = float(np.clip(np.asarray(action, dtype=np.float64).reshape(-1)[0], -1.0, 1.0))
-        if not np.isfinite(a):
+        model with the applied input (``clip(action, -1, 1) * u_max`` [input units])."""
+        a = float(np.asarray(action, dtype=np.float64).reshape(-1)[0])
+        u = input_from_action(a, self.u_max)
+        if not math.isfinite(u):
             raise ValueError(f"applied action must be finite, got {action!r}")
-        self._u = a * self.u_max
+        self._u = u
 
     @property
     def records(self) -> list:
@@ -138,8 +142,9 @@ class ReferencePolicy:
             self.diagnostics["error"] = f"{type(exc).__name__}: {exc}"
             self.diagnostics["fallbacks"].append(("zero input", self.estimator.t, str(exc)))
             u = 0.0
-        a = max(-1.0, min(1.0, u / self.u_max))
-        self._u = a * self.u_max  # the input applied unless `applied` says otherwise
+        a = action_from_input(u, self.u_max)
+        # the input applied unless `applied` says otherwise
+        self._u = input_from_action(a, self.u_max)
         return np.array([a], dtype=np.float32)
 
     def _tick(self, q: np.ndarray, leg: int) -> float:

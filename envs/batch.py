@@ -1,7 +1,10 @@
 """The walkers behind both environments: :class:`WalkerBatch` and its compiled kernels.
 
 A :class:`WalkerBatch` holds ``n`` walkers of one :class:`envs.settings.EnvSettings` on one
-batched :class:`envs.physics.Simulator`. After every simulator step one compiled call computes
+batched :class:`envs.physics.Simulator`. It takes the env's actions, turns them into hip torques
+in its own buffer (:func:`envs.physics.actuator.actions_to_torques`; the unit chain of the hip
+command is documented in :mod:`envs.physics.actuator`) and steps the simulator with them. After
+every simulator step one compiled call computes
 each walker's reward and episode counters and its observation (rescanning the terrain only when
 the stance foot moved). :class:`envs.CompassGaitEnv` is a batch of one and the vector env a batch
 of ``num_envs``, so both give the same numbers step by step.
@@ -21,6 +24,7 @@ import numpy as np
 from numba import njit, prange
 
 from .physics import model
+from .physics.actuator import actions_to_torques
 from .physics.kernel import FAILURES
 from .physics.simulator import Simulator
 from .physics.terrain import Terrain
@@ -270,7 +274,7 @@ class WalkerBatch:
         self.n = n
         self.robot = s.robot
         self._P = s.robot.vector()
-        self.torque_per_action = s.robot.tau_max  # [N m] per unit action
+        self.torque_limit = s.robot.tau_max  # hip torque at |action| = 1 [N m]
         if parallel is None:
             parallel = n >= PARALLEL_MIN_WALKERS and numba.get_num_threads() > 1
         par = bool(parallel)
@@ -286,7 +290,7 @@ class WalkerBatch:
         self.sim_views = SimulatorViews.of(self.sim, s.reward.work_column)
         self.episode = EpisodeBuffers.zeros(n)
         self.obs_buffers = ObservationBuffers(s.sensors, s.observation, n, self.obs_dim)
-        self.tau = np.zeros(n)  # hip torques of the next step [N m]
+        self._torques = np.zeros(n)  # hip torques of the current step [N m]
         self.terrains: list[Terrain | None] = [None] * n
         self.specs = np.full(n, None, dtype=object)
         self.track_footholds = False
@@ -331,10 +335,19 @@ class WalkerBatch:
         o.fill(i)
 
     # ------------------------------------------------------------------ step
-    def step(self) -> None:
-        """Advance every walker by one control period under ``self.tau`` [N m]."""
+    def step(self, actions: Any) -> None:
+        """Advance every walker by one control period under its action.
+
+        Args:
+            actions: ``(n,)`` or ``(n, 1)`` normalised hip commands [-], clipped to [-1, 1];
+                the hip torque is ``action * torque_limit`` [N m], held over the period.
+
+        Raises:
+            ValueError: a NaN or infinite action, or a wrong shape (no walker is advanced).
+        """
         v, e, o = self.sim_views, self.episode, self.obs_buffers
-        self.sim.step(self.tau)
+        actions_to_torques(actions, self.torque_limit, self._torques)
+        self.sim.step(self._torques)
         tx, ty, tn = self.sim.terrain_arrays
         self._after_step(
             o.mode, self._P, v.q, v.qd, v.stance_foot, v.stance_leg, v.status, v.n_impacts,

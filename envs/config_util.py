@@ -4,7 +4,9 @@ Every settings object of the project (robot parameters, sensors, reward, planner
 ...) is a frozen dataclass that validates its own fields in ``__post_init__``. This module holds
 the one shared step in front of that: check that the input is a mapping, reject keys that are
 not fields (naming them and listing the allowed ones) and required fields that are missing, and
-turn a constructor ``TypeError`` into a ``ValueError``.
+turn a constructor ``TypeError`` into a ``ValueError``. A setting that moved to another object
+is listed in the dataclass's ``MOVED_FIELDS`` (name -> where it is set now); giving it, as a
+mapping key or a keyword argument (:func:`reject_moved_fields`), fails naming its replacement.
 """
 
 from __future__ import annotations
@@ -29,7 +31,8 @@ def dataclass_from_mapping(cls: type[T], data: Any, name: str, *, item: str = "s
 
     Raises:
         ValueError: ``data`` is not a mapping (``"{name} {item}s must be a mapping, got ..."``),
-            has keys that are not fields (``"unknown {name} {item}(s) [...]; allowed: [...]"``),
+            has keys that are not fields (``"unknown {name} {item}(s) [...]; allowed: [...]"``)
+            or that moved elsewhere (see :func:`reject_moved_fields`),
             lacks a field without a default (``"missing {name} {item}(s) [...]"``), or the
             constructor rejects a value (the dataclass's own message, or ``"bad {name}
             {item}s: ..."`` for a ``TypeError``).
@@ -40,6 +43,7 @@ def dataclass_from_mapping(cls: type[T], data: Any, name: str, *, item: str = "s
         return data
     if not isinstance(data, Mapping):
         raise ValueError(f"{name} {item}s must be a mapping, got {type(data).__name__}")
+    reject_moved_fields(cls, data)
     init_fields = [f for f in fields(cls) if f.init]
     known = {f.name for f in init_fields}
     unknown = sorted((k for k in data if k not in known), key=str)
@@ -55,3 +59,20 @@ def dataclass_from_mapping(cls: type[T], data: Any, name: str, *, item: str = "s
         return cls(**data)
     except TypeError as exc:
         raise ValueError(f"bad {name} {item}s: {exc}") from None
+
+
+def reject_moved_fields(cls: type, keys: Any) -> None:
+    """Fail on settings that moved from the dataclass ``cls`` to another object.
+
+    Args:
+        cls: a dataclass; its optional class attribute ``MOVED_FIELDS`` maps a former field's
+            name to where it is set now.
+        keys: the names given (a mapping's keys or keyword arguments).
+
+    Raises:
+        ValueError: ``"{cls}.{key} moved: {where}"`` for the first moved name in ``keys``.
+    """
+    moved = getattr(cls, "MOVED_FIELDS", None) or {}
+    for key in keys:
+        if key in moved:
+            raise ValueError(f"{cls.__name__}.{key} moved: {moved[key]}")

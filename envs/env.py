@@ -1,59 +1,27 @@
-"""The Gymnasium environment of the compass-gait biped (:class:`CompassGaitEnv`) and the action
-scaling it shares with the vector env (:func:`actions_to_torques`).
+"""The Gymnasium environment of the compass-gait biped (:class:`CompassGaitEnv`).
 
 The env is a :class:`envs.batch.WalkerBatch` of one walker; its settings come from an env config
 in ``configs/envs/`` (``config="flat"``, ``"stairs"``, ``"rough"``, ``"slope"`` or a path) and
-keyword overrides, resolved by :func:`envs.settings.resolve_env_settings`.
+keyword overrides, resolved by :func:`envs.settings.resolve_env_settings`. The batch turns the
+action into the hip torque; the hip command's units from a controller's input to the equations
+of motion are documented in :mod:`envs.physics.actuator`.
 """
 
 from __future__ import annotations
 
-import math
 from pathlib import Path
 from typing import Any
 
 import gymnasium as gym
 import numpy as np
 from gymnasium import spaces
-from numba import njit
 
 from .batch import WalkerBatch
+from .physics.actuator import action_from_input, action_from_torque
 from .physics.simulator import Simulator
 from .physics.terrain import Terrain
 from .rendering import WalkerRenderer
 from .settings import resolve_env_settings
-
-
-@njit(cache=True)
-def _scale_actions(a, scale, out):
-    """``out = clip(a, -1, 1) * scale`` in float64; returns -1 or the first non-finite index."""
-    for i in range(a.size):
-        if not math.isfinite(a[i]):
-            return i
-    for i in range(a.size):
-        x = np.float64(a[i])
-        if x > 1.0:
-            x = 1.0
-        elif x < -1.0:
-            x = -1.0
-        out[i] = x * scale
-    return -1
-
-
-def actions_to_torques(actions: Any, scale: float, out: np.ndarray) -> None:
-    """Hip torques ``out = clip(actions, -1, 1) * scale`` [N m] for a batch of actions.
-
-    Raises ``ValueError`` on NaN/inf (nothing written) or a shape other than ``(n,)``/``(n, 1)``.
-    """
-    n = out.size
-    a = actions if type(actions) is np.ndarray else np.asarray(actions)
-    if a.dtype != np.float32 and a.dtype != np.float64:
-        a = a.astype(np.float64)
-    if a.size != n or a.ndim > 2:
-        raise ValueError(f"actions must have shape ({n}, 1), got {a.shape}")
-    bad = _scale_actions(a.reshape(n), float(scale), out)
-    if bad >= 0:
-        raise ValueError(f"action[{bad}] = {a.reshape(n)[bad]!r} must be finite (allowed: [-1, 1])")
 
 
 class CompassGaitEnv(gym.Env):
@@ -72,10 +40,11 @@ class CompassGaitEnv(gym.Env):
     ## Action Space
 
     ``Box(-1, 1, (1,), float32)``: the normalised hip command. The motor input is
-    ``u = action * u_max`` [input units] and the hip torque ``kI * ktau * u`` [N m]
-    (``env.unwrapped.torque_limit`` N m at ``|action| = 1``), held over the control period
-    ``env.unwrapped.dt``. Out-of-range actions are clipped to [-1, 1]; NaN or inf raise
-    ``ValueError``.
+    ``u = action * u_max`` [input units] and the hip torque ``input_gain * u`` [N m]
+    (``input_gain = kI * ktau``; ``env.unwrapped.torque_limit`` N m at ``|action| = 1``), held
+    over the control period ``env.unwrapped.dt``. Out-of-range actions are clipped to [-1, 1];
+    NaN or inf raise ``ValueError``. :mod:`envs.physics.actuator` documents the whole unit
+    chain.
 
     ## Observation Space
 
@@ -203,8 +172,6 @@ class CompassGaitEnv(gym.Env):
         self.render_mode = render_mode
         b.track_footholds = render_mode is not None
         self._renderer = None
-        self._tau = b.tau
-        self._scale = self.torque_limit
 
     @property
     def simulator(self) -> Simulator:
@@ -215,19 +182,11 @@ class CompassGaitEnv(gym.Env):
     # ------------------------------------------------------------------ controller helpers
     def action_from_input(self, u: float | np.ndarray) -> np.ndarray:
         """Action for a motor input ``u`` [input units] (``u / u_max``, clipped, float32)."""
-        return (
-            np.clip(np.asarray(u, dtype=np.float64) / self.u_max, -1, 1)
-            .astype(np.float32)
-            .reshape(1)
-        )
+        return np.array([action_from_input(_one("u", u), self.u_max)], dtype=np.float32)
 
     def action_from_torque(self, tau: float | np.ndarray) -> np.ndarray:
-        """Action for a hip torque ``tau`` [N m] (clipped, float32)."""
-        return (
-            np.clip(np.asarray(tau, dtype=np.float64) / self.torque_limit, -1, 1)
-            .astype(np.float32)
-            .reshape(1)
-        )
+        """Action for a hip torque ``tau`` [N m] (``tau / torque_limit``, clipped, float32)."""
+        return np.array([action_from_torque(_one("tau", tau), self.torque_limit)], dtype=np.float32)
 
     # ------------------------------------------------------------------ gym API
     def reset(
@@ -252,18 +211,7 @@ class CompassGaitEnv(gym.Env):
     def step(self, action: Any) -> tuple[np.ndarray, float, bool, bool, dict[str, Any]]:
         """Apply the hip command ``action`` in [-1, 1] for one control period."""
         b = self._batch
-        if type(action) is np.ndarray and action.shape == (1,):
-            a = float(action[0])
-            if not math.isfinite(a):
-                raise ValueError(f"action = {a!r} must be finite (allowed: [-1, 1])")
-            if a > 1.0:
-                a = 1.0
-            elif a < -1.0:
-                a = -1.0
-            self._tau[0] = a * self._scale
-        else:
-            actions_to_torques(action, self._scale, self._tau)
-        b.step()
+        b.step(action)
         if self.render_mode == "human":
             self.render()
         terminated = bool(b.terminated[0])
@@ -295,3 +243,11 @@ class CompassGaitEnv(gym.Env):
         if self._renderer is not None:
             self._renderer.close()
             self._renderer = None
+
+
+def _one(name: str, value: float | np.ndarray) -> float:
+    """``value`` as one float (a number or an array of one entry)."""
+    a = np.asarray(value, dtype=np.float64)
+    if a.size != 1:
+        raise ValueError(f"{name} must be one number, got shape {a.shape}")
+    return float(a.reshape(-1)[0])

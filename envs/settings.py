@@ -191,7 +191,7 @@ def resolve_env_settings(
     if torque_limit is not None:
         if isinstance(torque_limit, bool) or not isinstance(torque_limit, (int, float)):
             raise ValueError(f"torque_limit must be a number of N m, got {torque_limit!r}")
-        u_max = torque_limit / (robot.kI * robot.ktau)
+        u_max = torque_limit / robot.input_gain
     if u_max is not None:
         robot = robot.replace(u_max=u_max)
     dt = data.get("dt", 0.005)

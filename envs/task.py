@@ -4,31 +4,28 @@
 * :class:`InitialState`: the nominal post-impact start state, its random spread and the stance
   leg; :meth:`InitialState.sample` draws one episode's start.
 * :class:`TerrainSource`: a fixed course, or a generator of random courses drawn anew from a
-  seed at every reset; :func:`terrain_spec` resolves the ``terrain`` argument it is built from.
+  seed at every reset; :func:`envs.physics.terrain.terrain_spec` resolves the ``terrain``
+  argument it is built from (a name in ``configs/terrains``, a YAML path, a kind, a spec dict
+  or a Terrain).
 """
 
 from __future__ import annotations
 
-import copy
 import math
 from dataclasses import dataclass
-from pathlib import Path
 from typing import Any
 
 import numpy as np
-import yaml
-
-from configs import CONFIG_DIR
 
 from .physics.kernel import O_WABS, O_WNET, O_WPOS
-from .physics.terrain import Terrain
+from .physics.terrain import Terrain, terrain_spec
 
-TERRAIN_CONFIG_DIR = CONFIG_DIR / "terrains"
 #: ``reward.work`` kind -> column of :attr:`envs.physics.StepEvents.work`
 WORK_COLUMNS: dict[str, int] = {"net": O_WNET, "positive": O_WPOS, "absolute": O_WABS}
 #: entries of :meth:`RewardConfig.weights`
 W_PROGRESS, W_ENERGY, W_FAILURE = range(3)
-#: random terrain kinds -> the field that ``difficulty`` scales
+#: random terrain kinds (:data:`envs.physics.terrain.SEEDED_KINDS`) -> the field that
+#: ``difficulty`` scales
 RANDOM_KINDS: dict[str, str] = {"blocks": "height_range", "piecewise": "slope_range"}
 #: accepted stance-leg names and codes -> physical leg (0 = A, 1 = B)
 LEG_CODES: dict[Any, int] = {"A": 0, "B": 1, 0: 0, 1: 1}
@@ -156,32 +153,6 @@ def state_option(state: Any) -> tuple[np.ndarray, np.ndarray]:
 
 
 # ---------------------------------------------------------------------------- terrain
-def terrain_spec(terrain: Terrain | dict[str, Any] | str) -> Terrain | dict[str, Any]:
-    """Resolve the env's ``terrain`` argument: a :class:`Terrain` is kept; a string is the name
-    of a file in ``configs/terrains``, a YAML path, or ``"flat"``, and gives its spec dict; a
-    dict is copied."""
-    if isinstance(terrain, Terrain):
-        return terrain
-    if isinstance(terrain, str):
-        path = TERRAIN_CONFIG_DIR / f"{terrain}.yaml"
-        if path.is_file():
-            with open(path) as fh:
-                return dict(yaml.safe_load(fh))
-        if terrain.endswith((".yaml", ".yml")) and Path(terrain).is_file():
-            with open(terrain) as fh:
-                return dict(yaml.safe_load(fh))
-        if terrain == "flat":
-            return {"kind": "flat"}
-        names = sorted(p.stem for p in TERRAIN_CONFIG_DIR.glob("*.yaml"))
-        raise ValueError(
-            f"unknown terrain {terrain!r}; use a name in {names}, a YAML path, a spec dict "
-            "or an envs.Terrain"
-        )
-    if isinstance(terrain, dict):
-        return copy.deepcopy(terrain)
-    raise ValueError(f"terrain must be a Terrain, a spec dict or a name, got {type(terrain)}")
-
-
 class TerrainSource:
     """Fixed terrain, or a generator of random terrain drawn anew from a seed at each reset.
 
@@ -190,7 +161,8 @@ class TerrainSource:
     kinds' heights (``height_range`` of blocks, ``slope_range`` of piecewise ground).
 
     Args:
-        terrain: a :class:`Terrain`, a spec dict or a name (see :func:`terrain_spec`).
+        terrain: a :class:`Terrain`, a spec dict or a name (see
+            :func:`envs.physics.terrain.terrain_spec`).
         difficulty: scale of the random kinds' heights, finite >= 0 (1: as specified).
     """
 

@@ -28,7 +28,6 @@ from gymnasium.vector import AutoresetMode, VectorEnv
 from gymnasium.vector.utils import batch_space
 
 from .batch import WalkerBatch
-from .env import actions_to_torques
 from .physics.simulator import Simulator
 from .physics.terrain import Terrain
 from .rendering import WalkerRenderer
@@ -196,8 +195,7 @@ class CompassGaitVectorEnv(VectorEnv):
         if not self._was_reset:
             raise gym.error.ResetNeeded("call reset() before step()")
         b = self._batch
-        actions_to_torques(actions, b.torque_per_action, b.tau)
-        b.step()
+        b.step(actions)
         self._steps += 1
         terminated = b.terminated.copy()
         if self.max_episode_steps is not None:

@@ -10,13 +10,14 @@ import functools
 import math
 from dataclasses import asdict, dataclass, fields
 from pathlib import Path
-from typing import Any
+from typing import Any, ClassVar
 
 import numpy as np
 import yaml
 
 from configs import CONFIG_DIR
-from envs.config_util import dataclass_from_mapping
+from envs.config_util import dataclass_from_mapping, reject_moved_fields
+from envs.physics.params import MOVED_TO_ROBOT
 
 from .footholds import FootholdRules
 
@@ -59,9 +60,6 @@ class PlannerConfig:
         gait_min_thetadot: least ``theta_dot`` of the nominal periodic gait [rad/s] (a reserve of
             kinetic energy for rises; the larger of the two applies to the gait).
         torque_fraction: nominal ``|u|`` stays below this fraction of ``u_max``.
-        retract: swing-foot retraction, fraction of ``l`` (same rule as the simulator).
-        arm_distance: the full-length swing foot may touch down once it is this far ahead of the
-            stance foot, fraction of ``l``; from then on it must stay above the ground.
         clearance: least height of the armed swing foot above the ground away from touchdown
             [m]; it ramps down to 0 over the last ``clearance_ramp`` fraction of the step.
         arm_clearance: least height of the full-length swing foot when it gets armed [m]; the
@@ -81,7 +79,16 @@ class PlannerConfig:
             change height by more than ``lookahead_rise`` [m] together, 0 never.
         candidates: footholds tried per step before giving up.
         candidate_spacing: least spacing between the footholds tried [m].
+
+    The swing-foot geometry is the robot's (:attr:`envs.physics.RobotParams.retract`,
+    :attr:`~envs.physics.RobotParams.arm_distance`, the simulator's rule): the planned swing
+    foot is retracted until it is ``arm_distance * l`` ahead of the stance foot, may touch down
+    from then on and must stay above the ground.
     """
+
+    MOVED_FIELDS: ClassVar[dict[str, str]] = {
+        key: MOVED_TO_ROBOT.format(key=key) for key in ("retract", "arm_distance")
+    }
 
     order: int = 4
     grid: int = 32
@@ -103,8 +110,6 @@ class PlannerConfig:
     min_thetadot: float = 0.2
     gait_min_thetadot: float = 0.0
     torque_fraction: float = 0.8
-    retract: float = 0.05
-    arm_distance: float = 0.1
     clearance: float = 0.004
     clearance_ramp: float = 0.3
     arm_clearance: float = 0.001
@@ -122,6 +127,12 @@ class PlannerConfig:
     lookahead_rise: float = 0.002
     candidates: int = 4
     candidate_spacing: float = 0.01
+
+    def __new__(cls, *args: Any, **kwargs: Any) -> PlannerConfig:
+        """Reject the settings that moved to :class:`envs.physics.RobotParams`, naming the
+        replacement."""
+        reject_moved_fields(cls, kwargs)
+        return super().__new__(cls)
 
     def __post_init__(self) -> None:
         for f in fields(self):
@@ -152,7 +163,7 @@ class PlannerConfig:
             if not getattr(self, name) > 0:
                 raise ValueError(f"PlannerConfig.{name} = {getattr(self, name)!r}; allowed: > 0")
         nonneg = (
-            "edge_margin drop_margin rise_margin max_rise max_drop retract arm_distance clearance "
+            "edge_margin drop_margin rise_margin max_rise max_drop clearance "
             "lookahead_rise arm_clearance retracted_clearance face_clearance touchdown_slope "
             "gait_min_thetadot w_speed w_end w_shape w_torque w_slope"
         ).split()
@@ -165,8 +176,6 @@ class PlannerConfig:
             raise ValueError(
                 f"PlannerConfig.torque_fraction = {self.torque_fraction}; allowed: <= 1"
             )
-        if not self.retract < 0.5:
-            raise ValueError(f"PlannerConfig.retract = {self.retract}; allowed: [0, 0.5)")
         if self.lookahead > 2:
             raise ValueError(f"PlannerConfig.lookahead = {self.lookahead}; allowed: 0, 1 or 2")
         self.rules()  # validates the foothold fields

@@ -40,7 +40,8 @@ class TerrainMap:
     """Terrain as the planner sees it: vectorised heights and the features to keep away from.
 
     Args:
-        terrain: a :class:`Terrain` (or a spec dict / kind name).
+        terrain: a :class:`Terrain`, a spec dict or a name (resolved by
+            :func:`envs.physics.terrain.as_terrain`).
     """
 
     def __init__(self, terrain: Terrain | dict | str):
@@ -80,7 +81,9 @@ class TerrainMap:
 
     @classmethod
     def coerce(cls, terrain: TerrainMap | Terrain | dict | str | tuple) -> TerrainMap:
-        """A :class:`TerrainMap` from a map, a terrain, a spec, or a scan ``(xs, heights)``."""
+        """A :class:`TerrainMap` from a map, a scan ``(xs, heights)`` [m] (:meth:`from_scan`), or
+        anything :func:`envs.physics.terrain.as_terrain` resolves (a terrain, a spec dict, a
+        name)."""
         if isinstance(terrain, TerrainMap):
             return terrain
         if isinstance(terrain, tuple) and len(terrain) == 2:

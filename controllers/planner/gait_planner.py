@@ -43,6 +43,11 @@ class GaitPlanner:
         self, params: RobotParams | str, config: PlannerConfig | dict[str, Any] | None = None
     ):
         self.params = as_params(params)
+        if not self.params.retract < 0.5:
+            raise ValueError(
+                f"RobotParams.retract = {self.params.retract}; the planner allows [0, 0.5) "
+                "(fraction of l)"
+            )
         if config is None:
             config = PlannerConfig.for_robot(self.params.name)
         elif isinstance(config, dict):

@@ -253,8 +253,8 @@ class StepEvaluator:
             alpha_scale=alpha_scale,
             u_lim=u_lim,
             u_max=params.u_max,
-            retract=config.retract * l,
-            arm=config.arm_distance * l,
+            retract=params.retract * l,
+            arm=params.arm_distance * l,
             arm_clearance=config.arm_clearance,
             clearance=config.clearance,
             clearance_ramp=config.clearance_ramp,
@@ -333,7 +333,7 @@ class StepEvaluator:
         out = self._face_cache.get(key)
         if out is None:
             faces = self.tmap.faces_between(xs, x_foot)
-            arm = self.cfg.arm_distance * self.l
+            arm = self.params.arm_distance * self.l
             ground = StepGround(
                 self.tmap.xs,
                 self.tmap.ys,

@@ -13,7 +13,8 @@ buffers these kernels work on; their layouts are the ``X_*``, ``F_*``, ``E_*``, 
 Rules of the hybrid model (see also the README section "Simulator"):
 
 * **Retractable feet.** Right after lift-off the swing foot is retracted by
-  ``retract * l`` along the leg. It is *armed* (extended, latched until the next touchdown)
+  ``retract * l`` along the leg (``retract`` and ``arm_distance`` are robot parameters,
+  :class:`envs.physics.RobotParams`). It is *armed* (extended, latched until the next touchdown)
   as soon as, at the end of a substep, its full-length position is ahead of the stance foot
   by at least ``arm_distance * l`` (horizontally) and above the ground. A touchdown is the
   first downward zero crossing of the full-length clearance (foot height minus ground height)
@@ -41,7 +42,9 @@ Rules of the hybrid model (see also the README section "Simulator"):
   the failure instant and is not advanced again until it is reset.
 
 Time is held in float64 seconds; the hip input of the kernels is the hip torque in N m (the
-actuator limit ``u_max`` is the environment's business, not the simulator's).
+actuator limit ``u_max`` is the environment's business, not the simulator's); the dynamics take
+it in input units (:func:`envs.physics.model.input_from_torque`) and the motor work turns it
+back into N m (:func:`envs.physics.model.torque_from_input`), see :mod:`envs.physics.actuator`.
 """
 
 from __future__ import annotations
@@ -53,7 +56,7 @@ import numba
 from numba import njit, prange
 
 from . import model
-from .params import PB, PL
+from .params import PARM, PL, PRETRACT
 from .terrain import terrain_height, terrain_slope
 
 # OpenMP worker threads spin while they wait; on a machine whose cores are busy with other
@@ -77,9 +80,10 @@ N_E = 11
 # per-step output out[N, 3]: motor work (net, positive, absolute) over the step [J]
 O_WNET, O_WPOS, O_WABS = range(3)
 N_O = 3
-# config vector (SimConfig.vector(); lengths as fractions of l, flags 0.0 or 1.0)
-C_SUBSTEP, C_RETRACT, C_ARM, C_FALL_H, C_Q2MAX, C_MU, C_TTOL, C_FACE, C_REACT, C_IMPACT = range(10)
-N_C = 10
+# config vector (SimConfig.vector(); lengths as fractions of l, flags 0.0 or 1.0); the foot
+# geometry (retraction, arming distance) is the robot's: P[PRETRACT], P[PARM]
+C_SUBSTEP, C_FALL_H, C_Q2MAX, C_MU, C_TTOL, C_FACE, C_REACT, C_IMPACT = range(8)
+N_C = 8
 
 #: failure codes (index) and names; code 0 means "running"
 FAILURES = ("", "fall", "trip", "liftoff", "slip", "stuck", "invalid")
@@ -186,10 +190,10 @@ def walker_step(P, cfg, tx, ty, n, x, f, tau, dt, ev, out):
     if f[F_STATUS] != OK:
         return
     kmax = ev.shape[0]
-    u = tau / P[PB]
+    u = model.input_from_torque(P, tau)
     l = P[PL]
-    retract = cfg[C_RETRACT] * l
-    arm = cfg[C_ARM] * l
+    retract = P[PRETRACT] * l
+    arm = P[PARM] * l
     ttol = cfg[C_TTOL]
     react = cfg[C_REACT] != 0.0
     q1, q2, w1, w2 = x[X_Q1], x[X_Q2], x[X_Q1D], x[X_Q2D]
@@ -370,6 +374,6 @@ def initial_flags(P, cfg, tx, ty, n, q1, q2, xs, ys):
     foot at ``(xs, ys)`` [m]: whether the swing foot starts armed, and the height of the
     retracted swing-foot point above the ground."""
     c, fx = _clearance(P, tx, ty, n, q1, q2, xs, ys, 0.0)
-    r, _ = _clearance(P, tx, ty, n, q1, q2, xs, ys, cfg[C_RETRACT] * P[PL])
-    armed = c > 0.0 and fx - xs >= cfg[C_ARM] * P[PL]
+    r, _ = _clearance(P, tx, ty, n, q1, q2, xs, ys, P[PRETRACT] * P[PL])
+    armed = c > 0.0 and fx - xs >= P[PARM] * P[PL]
     return armed, r

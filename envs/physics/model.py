@@ -12,7 +12,8 @@ Coordinates and units: ``q1`` [rad] is the inter-leg (hip) angle, ``q2`` [rad] t
 angle from the vertical (positive when the hip is ahead of the stance foot); ``q1d, q2d`` are
 their rates [rad/s] and ``q1dd, q2dd`` their accelerations [rad/s^2]. The swing-leg angle from
 the vertical is ``q2 - q1``. ``(xs, ys)`` is the stance-foot position [m]. The input ``u`` is in
-input units; the hip torque is ``P[PB] * u`` [N m] on the ``q1`` row.
+input units; the hip torque is ``P[PB] * u`` [N m] on the ``q1`` row (:func:`torque_from_input`;
+:func:`input_from_torque` inverts it).
 """
 
 from __future__ import annotations
@@ -85,6 +86,18 @@ def input_gain(P):
 
 
 @_jit
+def torque_from_input(P, u):
+    """Hip torque ``input_gain * u`` [N m] of the input ``u`` [input units]."""
+    return P[PB] * u
+
+
+@_jit
+def input_from_torque(P, tau):
+    """Input ``tau / input_gain`` [input units] that makes the hip torque ``tau`` [N m]."""
+    return tau / P[PB]
+
+
+@_jit
 def accelerations(P, q1, q2, q1d, q2d, u):
     """Joint accelerations ``(q1dd, q2dd)`` [rad/s^2] of the swing phase at the state
     ``(q1, q2)`` [rad], ``(q1d, q2d)`` [rad/s] under the input ``u`` [input units].
@@ -94,7 +107,7 @@ def accelerations(P, q1, q2, q1d, q2d, u):
     m11, m12, m22 = mass_matrix(P, q1)
     c1, c2 = coriolis(P, q1, q1d, q2d)
     g1, g2 = gravity(P, q1, q2)
-    r1 = P[PB] * u - c1 - g1 - friction(P, q1d)
+    r1 = torque_from_input(P, u) - c1 - g1 - friction(P, q1d)
     r2 = -c2 - g2
     det = m11 * m22 - m12 * m12
     return (m22 * r1 - m12 * r2) / det, (m11 * r2 - m12 * r1) / det
@@ -122,7 +135,7 @@ def swing_rk4(P, q1, q2, q1d, q2d, u, h, q1dd, q2dd):
     nq2 = q2 + h6 * (q2d + 2.0 * w2_2 + 2.0 * w2_3 + w2_4)
     nw1 = q1d + h6 * (q1dd + 2.0 * a2 + 2.0 * a3 + a4)
     nw2 = q2d + h6 * (q2dd + 2.0 * b2 + 2.0 * b3 + b4)
-    tau = P[PB] * u
+    tau = torque_from_input(P, u)
     p1, p2, p3, p4 = tau * q1d, tau * w1_2, tau * w1_3, tau * w1_4
     wnet = h6 * (p1 + 2.0 * p2 + 2.0 * p3 + p4)
     wpos = h6 * (max(p1, 0.0) + 2.0 * max(p2, 0.0) + 2.0 * max(p3, 0.0) + max(p4, 0.0))

@@ -20,7 +20,7 @@ from ..config_util import dataclass_from_mapping
 
 # Layout of the flat parameter vector consumed by the compiled model kernels (envs.physics.model).
 P1, P2, P3, P4, P5, P6, P7, P8 = range(8)  # coefficients p1 .. p8 (RobotParams.coefficients)
-PB = 8  # hip torque per unit input, kI * ktau [N m]
+PB = 8  # hip torque per unit input, RobotParams.input_gain = kI * ktau [N m per input unit]
 PFC = 9  # Coulomb friction [N m]
 PFV = 10  # viscous friction [N m s/rad]
 PL = 11  # leg length [m]
@@ -31,7 +31,16 @@ PMHG = 15  # gravitational hip mass [kg]
 PG = 16  # gravity [m/s^2]
 PIC = 17  # leg inertia [kg m^2]
 PUMAX = 18  # input limit [input units]
-N_PARAMS = 19
+PRETRACT = 19  # swing-foot retraction, fraction of l
+PARM = 20  # arming distance of the swing foot, fraction of l
+N_PARAMS = 21
+
+#: the error for a setting that moved to :class:`RobotParams` (``key``: the field), e.g. the
+#: swing-foot geometry that the simulator and planner settings held
+MOVED_TO_ROBOT = (
+    "it is a robot parameter now, read by the simulator, the planner and the state estimator "
+    "alike: set RobotParams.{key} (robot YAML key '{key}', or RobotParams.replace({key}=...))"
+)
 
 
 @dataclass(frozen=True)
@@ -51,8 +60,17 @@ class RobotParams:
         ktau: motor torque constant [N m/A], > 0.
         Fc: hip Coulomb friction [N m], >= 0.
         Fv: hip viscous friction [N m s/rad], >= 0.
-        u_max: actuator limit on the input [input units], > 0; hip torque is ``kI * ktau * u``.
+        u_max: actuator limit on the input [input units], > 0; hip torque is
+            ``input_gain * u`` with ``input_gain = kI * ktau``.
+        retract: swing-foot retraction: right after lift-off the swing leg is shortened by
+            ``retract * l`` [fraction of l], in [0, 0.5].
+        arm_distance: the full-length swing foot is armed for touchdown once it is
+            ``arm_distance * l`` ahead of the stance foot (horizontally) [fraction of l], in
+            [0, 2].
         name: label of the parameter set.
+
+    The simulator, the gait planner and the state estimator all read ``retract`` and
+    ``arm_distance`` from here (the retractable-foot rule of :mod:`envs.physics.kernel`).
     """
 
     m: float
@@ -67,6 +85,8 @@ class RobotParams:
     Fc: float = 0.0
     Fv: float = 0.0
     u_max: float = 40.0
+    retract: float = 0.05
+    arm_distance: float = 0.1
     name: str = "custom"
 
     def __post_init__(self) -> None:
@@ -96,15 +116,25 @@ class RobotParams:
         _require(self.Fc >= 0, "Fc", self.Fc, ">= 0 N m")
         _require(self.Fv >= 0, "Fv", self.Fv, ">= 0 N m s/rad")
         _require(self.u_max > 0, "u_max", self.u_max, "> 0 input units")
+        _require(0 <= self.retract <= 0.5, "retract", self.retract, "[0, 0.5] (fraction of l)")
+        _require(
+            0 <= self.arm_distance <= 2, "arm_distance", self.arm_distance, "[0, 2] (fraction of l)"
+        )
         # Positive definiteness of M for all q1: M11 = p1 > 0 and det(M) > 0.
         p1 = (self.l - self.lc) ** 2 * self.m + self.Ic
         _require(p1 > 0, "Ic", self.Ic, "> 0 when lc == l (swing-leg inertia about the hip is 0)")
 
     # ------------------------------------------------------------------ derived quantities
     @property
+    def input_gain(self) -> float:
+        """Hip torque per unit input, ``kI * ktau`` [N m per input unit] (``b`` of
+        ``B = [b, 0]``; compiled kernels read it as :func:`envs.physics.model.input_gain`)."""
+        return self.kI * self.ktau
+
+    @property
     def tau_max(self) -> float:
-        """Largest hip torque the actuator can produce [N m]."""
-        return self.kI * self.ktau * self.u_max
+        """Largest hip torque the actuator can produce, ``input_gain * u_max`` [N m]."""
+        return self.input_gain * self.u_max
 
     @property
     def total_mass(self) -> float:
@@ -131,10 +161,11 @@ class RobotParams:
         c = self.coefficients()
         v = np.zeros(N_PARAMS)
         v[:8] = [c[f"p{i}"] for i in range(1, 9)]
-        v[PB] = self.kI * self.ktau
+        v[PB] = self.input_gain
         v[PFC], v[PFV] = self.Fc, self.Fv
         v[PL], v[PLC], v[PM], v[PMH], v[PMHG] = self.l, self.lc, self.m, self.mH, self.mHg
         v[PG], v[PIC], v[PUMAX] = self.g, self.Ic, self.u_max
+        v[PRETRACT], v[PARM] = self.retract, self.arm_distance
         return v
 
     # ------------------------------------------------------------------ (de)serialisation

@@ -12,20 +12,19 @@ from __future__ import annotations
 import math
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field, fields
-from typing import Any
+from typing import Any, ClassVar
 
 import numba
 import numpy as np
 
+from ..config_util import reject_moved_fields
 from .kernel import (
-    C_ARM,
     C_FACE,
     C_FALL_H,
     C_IMPACT,
     C_MU,
     C_Q2MAX,
     C_REACT,
-    C_RETRACT,
     C_SUBSTEP,
     C_TTOL,
     E_FX,
@@ -55,7 +54,7 @@ from .kernel import (
     step_parallel,
     step_serial,
 )
-from .params import N_PARAMS, RobotParams, as_params
+from .params import MOVED_TO_ROBOT, N_PARAMS, RobotParams, as_params
 from .terrain import Terrain, as_terrain
 
 
@@ -66,9 +65,6 @@ class SimConfig:
     Attributes:
         substep: largest RK4 substep [s], > 0; each control period ``dt`` is split into
             ``ceil(dt / substep)`` equal substeps.
-        retract: swing-foot retraction as a fraction of the leg length ``l``, in [0, 0.5].
-        arm_distance: how far (horizontally) the full-length swing foot must be ahead of the
-            stance foot before it is armed, fraction of ``l``, in [0, 2].
         fall_height: hip height above the ground below which the walker has fallen, fraction
             of ``l``, in [0, 1).
         q2_limit: largest ``|q2|`` [rad] before the walker has fallen, in (0, pi/2].
@@ -78,11 +74,15 @@ class SimConfig:
         check_reaction: check lift-off and slip of the stance foot during the swing phase.
         check_impact: check the impact impulse and the trailing foot's take-off.
         max_impacts: most impacts recorded within one control period; more is "stuck".
+
+    The foot geometry (``retract``, ``arm_distance``) is the robot's: :class:`RobotParams`.
     """
 
+    MOVED_FIELDS: ClassVar[dict[str, str]] = {
+        key: MOVED_TO_ROBOT.format(key=key) for key in ("retract", "arm_distance")
+    }
+
     substep: float = 2.5e-3
-    retract: float = 0.05
-    arm_distance: float = 0.1
     fall_height: float = 0.5
     q2_limit: float = 1.2
     mu: float = 1.0
@@ -91,6 +91,11 @@ class SimConfig:
     check_reaction: bool = True
     check_impact: bool = True
     max_impacts: int = 4
+
+    def __new__(cls, *args: Any, **kwargs: Any) -> SimConfig:
+        """Reject the settings that moved to :class:`RobotParams`, naming the replacement."""
+        reject_moved_fields(cls, kwargs)
+        return super().__new__(cls)
 
     def __post_init__(self) -> None:
         def req(ok: bool, name: str, allowed: str) -> None:
@@ -111,8 +116,6 @@ class SimConfig:
             req(isinstance(v, (int, float, np.floating, np.integer)), f.name, "a real number")
             req(not math.isnan(float(v)), f.name, "not NaN")
         req(0 < self.substep <= 0.1, "substep", "(0, 0.1] s")
-        req(0 <= self.retract <= 0.5, "retract", "[0, 0.5] (fraction of l)")
-        req(0 <= self.arm_distance <= 2, "arm_distance", "[0, 2] (fraction of l)")
         req(0 <= self.fall_height < 1, "fall_height", "[0, 1) (fraction of l)")
         req(0 < self.q2_limit <= math.pi / 2, "q2_limit", "(0, pi/2] rad")
         req(self.mu > 0, "mu", "> 0 (inf disables the slip check)")
@@ -127,7 +130,7 @@ class SimConfig:
     def vector(self) -> np.ndarray:
         """Flat float64 vector for the kernels (layout: the ``C_*`` constants)."""
         c = np.zeros(N_C)
-        c[C_SUBSTEP], c[C_RETRACT], c[C_ARM] = self.substep, self.retract, self.arm_distance
+        c[C_SUBSTEP] = self.substep
         c[C_FALL_H], c[C_Q2MAX], c[C_MU] = self.fall_height, self.q2_limit, self.mu
         c[C_TTOL], c[C_FACE] = self.time_tol, self.face_tol
         c[C_REACT], c[C_IMPACT] = float(self.check_reaction), float(self.check_impact)
@@ -590,7 +593,8 @@ def simulate(
 
     Args:
         params: robot parameters or a preset name.
-        terrain: a :class:`Terrain`, a spec dict, or a kind name (``"flat"``).
+        terrain: a :class:`Terrain`, a spec dict, or a name (``"flat"``; see
+            :func:`envs.physics.terrain.terrain_spec`).
         q0: start ``(q1, q2)`` [rad]; qd0: start ``(q1d, q2d)`` [rad/s].
         duration: simulated time [s], > 0.
         torque: hip torque [N m] (not limited by ``u_max``): None (passive), a float, or a

@@ -7,11 +7,28 @@ first vertex and right of the last, the ground continues along the first / last 
 
 A terrain serialises to a plain dict (``to_dict``) that rebuilds it exactly (``from_dict``), so
 courses can be saved as YAML, shared and replayed.
+
+Representations of a terrain, and the one conversion between each pair:
+
+* :class:`Terrain`: the polyline (``xs``, ``ys``) and the spec it was built from;
+* its spec dict / YAML form: :meth:`Terrain.to_dict` / :meth:`Terrain.from_dict`,
+  :meth:`Terrain.to_yaml` / :meth:`Terrain.from_yaml`; a spec of a random kind without a
+  ``seed`` is a generator of courses (:class:`envs.task.TerrainSource` draws the seed);
+* a terrain argument (a :class:`Terrain`, a spec dict or a string): :func:`terrain_spec`
+  resolves it to a Terrain or a spec, :func:`as_terrain` to a Terrain; the meaning of a string
+  is defined there and nowhere else;
+* the compiled arrays: :meth:`Terrain.arrays` (read-only vertices) for
+  :func:`terrain_height` / :func:`terrain_slope`, padded into one row per walker by
+  :meth:`envs.physics.Simulator.set_terrain`;
+* the planner's map, :class:`controllers.planner.footholds.TerrainMap` (a Terrain with its
+  faces and kinks, or one rebuilt from scanned heights), made by ``TerrainMap.coerce``.
 """
 
 from __future__ import annotations
 
+import copy
 import math
+import os
 from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
@@ -20,7 +37,17 @@ import numpy as np
 import yaml
 from numba import njit
 
+from configs import CONFIG_DIR
+
 KINDS = ("flat", "slope", "stairs", "blocks", "piecewise", "points")
+#: kinds drawn from a ``seed``: a spec of one of them without a seed is a generator of courses
+SEEDED_KINDS = ("blocks", "piecewise")
+#: kinds that a bare name builds with default fields (``"slope"``: level, angle 0; the seeded
+#: kinds: a generator with default fields)
+NAMED_KINDS = ("flat", "slope", "blocks", "piecewise")
+#: the courses shipped with the project: ``NAME.yaml`` spec files
+TERRAIN_CONFIG_DIR = CONFIG_DIR / "terrains"
+_YAML_SUFFIXES = (".yaml", ".yml")
 
 
 @njit(cache=True, error_model="numpy")
@@ -333,8 +360,7 @@ class Terrain:
     @classmethod
     def from_yaml(cls, path: str | Path) -> Terrain:
         """Read a spec from the YAML file at ``path`` (see :meth:`from_dict`)."""
-        with open(path) as fh:
-            return cls.from_dict(yaml.safe_load(fh))
+        return cls.from_dict(_read_spec(path))
 
     # ------------------------------------------------------------------ queries
     @property
@@ -397,13 +423,79 @@ class Terrain:
     __hash__ = None  # type: ignore[assignment]
 
 
-def as_terrain(spec: Terrain | dict[str, Any] | str) -> Terrain:
-    """Coerce a :class:`Terrain`, a spec dict, or a kind name with default fields."""
-    if isinstance(spec, str):
-        if spec in ("blocks", "piecewise"):
-            raise ValueError(f"terrain kind {spec!r} needs a seed: pass a dict with 'seed'")
-        return Terrain.from_dict({"kind": spec} if spec != "slope" else {"kind": spec, "angle": 0})
+def available_terrains() -> list[str]:
+    """Names of the courses shipped in ``configs/terrains`` (usable wherever a terrain is)."""
+    return sorted(p.stem for p in TERRAIN_CONFIG_DIR.glob("*.yaml"))
+
+
+def terrain_spec(
+    terrain: Terrain | dict[str, Any] | str | os.PathLike,
+) -> Terrain | dict[str, Any]:
+    """Resolve a terrain argument: the one meaning of a terrain given by name.
+
+    A :class:`Terrain` is returned as it is, a spec dict as a deep copy. A string (or path) is,
+    in this order:
+
+    1. the name of a course shipped in ``configs/terrains`` (:func:`available_terrains`);
+    2. a path to a YAML spec file (ending in ``.yaml`` or ``.yml``);
+    3. a kind with default fields (:data:`NAMED_KINDS`): ``"flat"`` (height 0), ``"slope"``
+       (angle 0), ``"blocks"`` or ``"piecewise"`` (random, without a seed).
+
+    ``"flat"`` is both a shipped course and a kind, with the same meaning (level ground at
+    height 0). Returns the :class:`Terrain` or the spec dict (built by :func:`as_terrain`, or
+    drawn from by :class:`envs.task.TerrainSource` when it is a seedless random kind).
+
+    Raises:
+        ValueError: an unknown name or a missing file (the message lists what is allowed), or
+            a value that is none of the above.
+    """
+    if isinstance(terrain, Terrain):
+        return terrain
+    if isinstance(terrain, dict):
+        return copy.deepcopy(terrain)
+    if not isinstance(terrain, (str, os.PathLike)):
+        raise ValueError(
+            f"terrain must be a Terrain, a spec dict or a name, got {type(terrain).__name__}"
+        )
+    name = os.fspath(terrain)
+    shipped = TERRAIN_CONFIG_DIR / f"{name}.yaml"
+    if shipped.is_file():
+        return _read_spec(shipped)
+    if name.endswith(_YAML_SUFFIXES):
+        if not Path(name).is_file():
+            raise ValueError(f"terrain file {name!r} does not exist")
+        return _read_spec(name)
+    if name in NAMED_KINDS:
+        return {"kind": name, "angle": 0.0} if name == "slope" else {"kind": name}
+    raise ValueError(
+        f"unknown terrain {name!r}; allowed: a course in configs/terrains "
+        f"{available_terrains()}, a path to a YAML spec file, a kind with default fields "
+        f"{list(NAMED_KINDS)}, a spec dict or an envs.Terrain"
+    )
+
+
+def as_terrain(spec: Terrain | dict[str, Any] | str | os.PathLike) -> Terrain:
+    """A :class:`Terrain` from a Terrain, a spec dict or a name (resolved by
+    :func:`terrain_spec`); a random kind needs its ``seed``."""
+    if isinstance(spec, Terrain):
+        return spec
+    if not isinstance(spec, dict):
+        spec = terrain_spec(spec)
+    if isinstance(spec, dict) and spec.get("kind") in SEEDED_KINDS and "seed" not in spec:
+        raise ValueError(
+            f"terrain kind {spec['kind']!r} is random and needs a seed: pass a spec dict with "
+            "'seed' (an env's terrain may omit it: a new course is drawn at every reset)"
+        )
     return Terrain.from_dict(spec)
+
+
+def _read_spec(path: str | os.PathLike) -> dict[str, Any]:
+    """The spec dict in the YAML file ``path``."""
+    with open(path) as fh:
+        spec = yaml.safe_load(fh)
+    if not isinstance(spec, dict):
+        raise ValueError(f"terrain file {os.fspath(path)!r} must hold a spec mapping")
+    return dict(spec)
 
 
 def _seed(seed: Any) -> int:

@@ -4,7 +4,8 @@ import gymnasium as gym
 import numpy as np
 import pytest
 
-import envs  # noqa: F401  (registers the ids)
+import controllers.estimator
+import envs  # registers the ids
 from controllers import make_reference_policy
 from controllers.estimator import SensorStateEstimator
 
@@ -49,3 +50,21 @@ def test_decode_and_bad_input():
         SensorStateEstimator(gym.make("roughwalk/CompassGaitFlat-v0", observation="state"))
     assert est.update(q, leg, 0.0) == "start"
     np.testing.assert_allclose(est.x[2:], env.unwrapped.settings.initial_state.qd)
+
+
+def test_touchdowns_count_from_the_robots_arming_distance(monkeypatch):
+    robot = envs.RobotParams.from_preset("paper").replace(arm_distance=0.3)
+    env = gym.make("roughwalk/CompassGaitFlat-v0", robot=robot)
+    est = SensorStateEstimator(env)
+    obs, _ = env.reset(seed=0)
+    q, leg = est.decode(obs)
+    assert est.update(q, leg, 0.0) == "start"
+    seen, locate = [], controllers.estimator.predict_touchdown
+
+    def spy(*args):
+        seen.append(args[-1])  # the arming distance [m]
+        return locate(*args)
+
+    monkeypatch.setattr(controllers.estimator, "predict_touchdown", spy)
+    assert est.update(q, 1 - leg, 0.0) == "impact"
+    assert seen[0] == 0.3 * robot.l

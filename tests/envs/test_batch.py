@@ -24,8 +24,7 @@ def test_views_follow_the_simulator() -> None:
     for name, arr in [("q", sim.q), ("qd", sim.qd), ("stance_foot", sim.stance_foot),
                       ("status", sim.status), ("n_impacts", sim.events.n_impacts)]:  # fmt: skip
         assert np.shares_memory(getattr(v, name), arr), name
-    b.tau[:] = [0.5, -0.5, 0.0]
-    b.step()
+    b.step(np.array([0.5, -0.5, 0.0]))
     np.testing.assert_array_equal(v.work, sim.events.work[:, WORK_COLUMNS["positive"]])
     np.testing.assert_array_equal(v.x6, np.c_[sim.q, sim.qd, sim.stance_foot])
 
@@ -34,7 +33,7 @@ def test_episode_counters_and_infos() -> None:
     b = _batch()
     total = np.zeros(3)
     for _ in range(150):
-        b.step()
+        b.step(np.zeros((3, 1), dtype=np.float32))
         total += b.reward
     e = b.episode
     assert b.reward is e.reward and b.terminated is e.terminated
@@ -62,3 +61,21 @@ def test_delay_line(latency: int) -> None:
     assert seen == [max(k - latency, 0) for k in range(1, 6)]
     state = ObservationBuffers(SensorConfig(latency=latency), "state", 2, 3)
     assert state.mode == OBS_STATE and state.latency == 0
+
+
+def test_actions_become_torques_in_the_batchs_own_buffer() -> None:
+    b = _batch(reward={"work": "net"})
+    actions = np.array([[0.5], [-2.0], [0.0]], dtype=np.float32)
+    before = actions.copy()
+    b.step(actions)
+    assert np.array_equal(actions, before)  # the caller's array is only read
+    # the same walkers stepped under the torques clip(action, -1, 1) * tau_max [N m]
+    assert b.torque_limit == b.robot.tau_max
+    ref = _batch(reward={"work": "net"})
+    ref.sim.step(np.array([0.5, -1.0, 0.0]) * b.robot.tau_max)
+    assert np.array_equal(ref.sim.states, b.sim.states)
+    assert np.array_equal(ref.sim.events.work, b.sim.events.work)
+    with pytest.raises(ValueError, match=r"action\[1\]"):
+        b.step(np.array([0.0, np.nan, 0.0]))
+    with pytest.raises(ValueError, match="shape"):
+        b.step(np.zeros(2))

@@ -6,7 +6,7 @@ import pytest
 
 from controllers.controller import ControllerConfig
 from controllers.planner import PlannerConfig
-from envs.config_util import dataclass_from_mapping
+from envs.config_util import dataclass_from_mapping, reject_moved_fields
 from envs.physics import RobotParams
 from envs.sensors import SensorConfig
 from envs.settings import EnvSettings
@@ -85,3 +85,18 @@ def test_robot_params_round_trip_and_missing_field() -> None:
 def test_env_sections_share_the_messages(section: str) -> None:
     with pytest.raises(ValueError, match=rf"unknown {section} setting\(s\) \['colour'\]"):
         EnvSettings.build("flat", **{section: {"colour": "red"}})
+
+
+@dataclass(frozen=True)
+class _Renamed:
+    MOVED_FIELDS = {"gain": "use kp"}
+    kp: float = 1.0
+
+
+def test_moved_fields_name_their_replacement() -> None:
+    with pytest.raises(ValueError, match=r"_Renamed\.gain moved: use kp"):
+        dataclass_from_mapping(_Renamed, {"gain": 2.0}, "gain")
+    with pytest.raises(ValueError, match=r"_Renamed\.gain moved: use kp"):
+        reject_moved_fields(_Renamed, ["kp", "gain"])
+    reject_moved_fields(_Renamed, ["kp"])
+    reject_moved_fields(_Gains, ["gain"])  # a class without MOVED_FIELDS moves nothing

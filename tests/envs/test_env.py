@@ -45,10 +45,15 @@ def test_registered_ids_and_metadata() -> None:
     assert base.metadata["render_fps"] == pytest.approx(1 / base.dt) == pytest.approx(100)
     assert gym.make("roughwalk/CompassGaitFlat-v0").unwrapped.dt == pytest.approx(0.005)
     assert base.robot.name == "classic" and base.params is base.robot
-    assert base.torque_limit == pytest.approx(base.robot.kI * base.robot.ktau * base.u_max)
+    assert base.torque_limit == base.robot.input_gain * base.u_max == base.robot.tau_max
     paper = gym.make("roughwalk/CompassGaitStairs-v0").unwrapped
     assert paper.robot.name == "paper" and paper.terrain.spec["edges"] == [0.40, 0.62]
     assert paper.action_from_input(paper.u_max / 2)[0] == pytest.approx(0.5)
+    assert paper.action_from_input(np.array([-3.0 * paper.u_max])).tolist() == [-1.0]
+    assert paper.action_from_torque(paper.torque_limit / 4).tolist() == [0.25]
+    assert np.isnan(paper.action_from_input(np.nan)[0])
+    with pytest.raises(ValueError, match="one number"):
+        paper.action_from_input([1.0, 2.0])
 
 
 def _rollout(env: gym.Env, seed: int, steps: int) -> list:

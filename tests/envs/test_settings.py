@@ -7,6 +7,7 @@ import pytest
 import yaml
 
 import envs  # noqa: F401  (registers the ids)
+from envs.physics import RobotParams
 from envs.registration import ENV_IDS, NAMESPACE
 from envs.settings import (
     EnvSettings,
@@ -163,3 +164,17 @@ def test_user_configs_complete_or_over_a_base(tmp_path) -> None:
         load_env_config(str(loop))
     with pytest.raises(ValueError, match=r"unknown env setting\(s\) \['colour'\]"):
         load_env_config({"base": "flat", "colour": "red"})
+
+
+@pytest.mark.parametrize("key", ["retract", "arm_distance"])
+def test_foot_geometry_is_set_on_the_robot_not_the_simulator(key: str, tmp_path) -> None:
+    with pytest.raises(ValueError, match=rf"SimConfig\.{key} moved.*RobotParams\.{key}"):
+        resolve_env_settings("flat", simulator={key: 0.1})
+    mine = tmp_path / "mine.yaml"
+    mine.write_text(f"base: flat\nsimulator: {{{key}: 0.1}}\n")
+    with pytest.raises(ValueError, match=rf"RobotParams\.{key}"):
+        gym.make("roughwalk/CompassGait-v0", config=str(mine))
+    robot = RobotParams.from_preset("paper").replace(**{key: 0.2})
+    settings = resolve_env_settings("flat", robot=robot, torque_limit=0.5)
+    assert getattr(settings.robot, key) == 0.2  # kept when the actuator limit is applied
+    assert settings.robot.u_max == 0.5 / robot.input_gain

@@ -7,7 +7,7 @@ import pytest
 
 from envs import Terrain
 from envs.env import CompassGaitEnv
-from envs.task import WORK_COLUMNS, InitialState, RewardConfig, TerrainSource, terrain_spec
+from envs.task import WORK_COLUMNS, InitialState, RewardConfig, TerrainSource
 
 
 @pytest.mark.parametrize("work", sorted(WORK_COLUMNS))
@@ -53,8 +53,7 @@ def test_initial_state_sampling() -> None:
 
 
 def test_terrain_sources() -> None:
-    assert terrain_spec("flat")["kind"] == "flat"  # configs/terrains/flat.yaml
-    assert terrain_spec("paper_stairs")["kind"] == "stairs"
+    assert TerrainSource("flat").fixed == Terrain.flat()  # configs/terrains/flat.yaml
     fixed = TerrainSource("paper_stairs")
     assert not fixed.is_random and fixed.draw(np.random.default_rng(0)) is fixed.fixed
     rough = TerrainSource("rough_blocks", difficulty=2.0)
@@ -64,4 +63,7 @@ def test_terrain_sources() -> None:
     with pytest.raises(ValueError, match="difficulty"):
         TerrainSource("flat", difficulty=2.0)
     with pytest.raises(ValueError, match="unknown terrain"):
-        terrain_spec("no_such_course")
+        TerrainSource("no_such_course")
+    # a kind name of a random terrain is a generator with the kind's default fields
+    blocks = TerrainSource("blocks", difficulty=2.0)
+    assert blocks.is_random and blocks.template["height_range"] == [-0.04, 0.04]

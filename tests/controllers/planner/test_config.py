@@ -2,7 +2,8 @@
 
 import pytest
 
-from controllers.planner import PlannerConfig
+from controllers.planner import GaitPlanner, PlannerConfig
+from envs.physics import RobotParams
 
 
 def test_bad_config_raises():
@@ -14,3 +15,19 @@ def test_bad_config_raises():
         PlannerConfig(order=3)
     with pytest.raises(ValueError, match="step_min"):
         PlannerConfig(step_min=0.3, step_length=0.2)
+
+
+@pytest.mark.parametrize("key", ["retract", "arm_distance"])
+def test_foot_geometry_settings_moved_to_the_robot(key):
+    assert key not in PlannerConfig().to_dict()
+    with pytest.raises(ValueError, match=rf"PlannerConfig\.{key} moved.*RobotParams\.{key}"):
+        PlannerConfig(**{key: 0.1})
+    with pytest.raises(ValueError, match=rf"RobotParams\.{key}"):
+        PlannerConfig.for_robot("paper", **{key: 0.1})
+    with pytest.raises(ValueError, match=rf"RobotParams\.{key}"):
+        PlannerConfig.from_dict({key: 0.1})
+
+
+def test_the_planner_rejects_a_half_leg_retraction():
+    with pytest.raises(ValueError, match=r"RobotParams\.retract = 0.5.*\[0, 0.5\)"):
+        GaitPlanner(RobotParams.from_preset("paper").replace(retract=0.5))

@@ -137,3 +137,17 @@ def test_ranked_candidates_pick_spaced_footholds_that_keep_a_chain():
 def test_terrain_key_identifies_the_polyline():
     a, b = TerrainMap(TERRAINS["blocks"]), TerrainMap(TERRAINS["blocks"])
     assert a.key == b.key and a.key != TerrainMap(TERRAINS["flat"]).key
+
+
+def test_coerce_resolves_terrain_arguments_like_the_simulator():
+    stairs = Terrain.stairs([0.40, 0.62], [-0.03, -0.03])
+    for arg in ("paper_stairs", stairs, stairs.to_dict()):
+        assert TerrainMap.coerce(arg).key == TerrainMap(stairs).key
+    assert TerrainMap.coerce("flat").terrain == Terrain.flat()
+    tmap = TerrainMap(stairs)
+    assert TerrainMap.coerce(tmap) is tmap
+    x = np.linspace(0.0, 1.0, 51)
+    scanned = TerrainMap.coerce((x, stairs.height(x)))
+    assert len(scanned.faces) == 2
+    with pytest.raises(ValueError, match="unknown terrain"):
+        TerrainMap.coerce("stairs")

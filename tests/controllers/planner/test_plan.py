@@ -43,8 +43,8 @@ def test_plans_satisfy_the_step_constraints(planners, plans, robot, terrain):
         # swing foot above the ground once armed, retracted foot above it before
         ph = s.phi(th)
         x_full, y_full = model.swing_foot_position(P, ph, th, *s.stance_foot)
-        x_ret, y_ret = model.swing_foot_position(P, ph, th, *s.stance_foot, cfg.retract * l)
-        armed = np.maximum.accumulate(x_full - s.stance_foot[0] >= cfg.arm_distance * l)
+        x_ret, y_ret = model.swing_foot_position(P, ph, th, *s.stance_foot, pl.params.retract * l)
+        armed = np.maximum.accumulate(x_full - s.stance_foot[0] >= pl.params.arm_distance * l)
         assert np.all(y_ret[~armed] > tmap.height(x_ret[~armed]))
         assert np.all((y_full - tmap.height(x_full))[armed][:-1] > 0)
         # touchdown transversal: the foot moves down into the ground
@@ -84,7 +84,7 @@ def rollout(planner, plan, terrain, nsteps):
     """Enforce each step's constraint exactly (PFL, v = 0) in the nonlinear model and locate
     touchdowns of the armed full-length swing foot (retractable-foot rule)."""
     P, l = planner.P, planner.params.l  # noqa: E741
-    arm = planner.config.arm_distance * l
+    arm = planner.params.arm_distance * l
     tmap = TerrainMap(terrain)
     q, qd = plan.initial_state()
     x = np.array([q[0], q[1], qd[0], qd[1]])

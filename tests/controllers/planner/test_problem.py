@@ -122,3 +122,12 @@ def test_worst_violation_names_the_group_of_the_table():
         rows = [block[0] for block in ConstraintGroups(G, lay.offsets)]
         assert worst_violation(rows) == (-0.5, grp.violation)
     assert worst_violation([np.ones(3)]) == (0.0, "")
+
+
+def test_the_swing_foot_geometry_is_the_robots(planners):
+    pl = planners["paper"]
+    robot = pl.params.replace(retract=0.08, arm_distance=0.3)
+    sm = StepEvaluator(robot, pl.config, TerrainMap(CASES["paper"]["stairs_up"]))
+    assert sm.settings.retract == 0.08 * robot.l and sm.settings.arm == 0.3 * robot.l
+    default = StepEvaluator(pl.params, pl.config, TerrainMap("flat")).settings
+    assert (default.retract, default.arm) == (0.05 * robot.l, 0.1 * robot.l)

@@ -3,7 +3,8 @@ import math
 import numpy as np
 import pytest
 
-from envs.physics.params import RobotParams, available_presets
+from envs.physics import model
+from envs.physics.params import PARM, PB, PRETRACT, RobotParams, available_presets
 
 
 def test_presets_load_with_units_from_yaml():
@@ -31,6 +32,10 @@ def test_presets_load_with_units_from_yaml():
         ("mHg", -20.0),
         ("Fc", -1.0),
         ("u_max", 0.0),
+        ("retract", -0.01),
+        ("retract", 0.51),
+        ("arm_distance", -0.1),
+        ("arm_distance", 2.5),
         ("l", math.nan),
         ("m", math.inf),
     ],
@@ -58,3 +63,22 @@ def test_vector_layout_matches_appendix_b():
     c = p.coefficients()
     assert np.allclose(v[:8], [c[f"p{i}"] for i in range(1, 9)])
     assert math.isclose(c["p5"], p.g * (p.mHg * p.l + 2 * p.m * p.lc))
+
+
+@pytest.mark.parametrize("preset", ["paper", "classic"])
+def test_input_gain_is_the_torque_per_unit_input_declared_once(preset):
+    p = RobotParams.from_preset(preset)
+    assert p.input_gain == p.kI * p.ktau  # exactly: the one place the product is formed
+    assert p.tau_max == p.kI * p.ktau * p.u_max
+    P = p.vector()
+    assert P[PB] == p.input_gain and model.input_gain(P) == p.input_gain
+    assert RobotParams.from_preset("paper").replace(kI=2.0, ktau=0.5).input_gain == 1.0
+
+
+@pytest.mark.parametrize("preset", ["paper", "classic"])
+def test_foot_geometry_is_a_robot_parameter(preset):
+    p = RobotParams.from_preset(preset)
+    assert (p.retract, p.arm_distance) == (0.05, 0.1)  # fractions of l, as before the move
+    q = p.replace(retract=0.5, arm_distance=2.0)  # the bounds are allowed
+    assert (q.vector()[PRETRACT], q.vector()[PARM]) == (0.5, 2.0)
+    assert RobotParams.from_dict(q.to_dict()) == q

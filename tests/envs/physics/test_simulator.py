@@ -26,7 +26,8 @@ Q0 = (Q2P - SWING, Q2P)
 QD0 = (Q2DP - SWINGD, Q2DP)
 # the stance foot on a narrow pillar over a deep pit: the swing foot never meets the ground
 PILLAR = Terrain.from_points([-1, -0.05, -0.05, 0.05, 0.05, 1], [-5, -5, 0, 0, -5, -5])
-FREE = {"check_reaction": False, "arm_distance": 2.0}
+FREE = {"check_reaction": False}
+NEVER_ARMED = {"arm_distance": 2.0}  # robot parameters of a swing foot that is never armed
 
 
 def _energy_error(params, config, q0, qd0, duration=1.0):
@@ -47,6 +48,7 @@ def _energy_error(params, config, q0, qd0, duration=1.0):
 )
 def test_energy_conserved_in_unforced_frictionless_swing(params):
     start = ((0.6, 0.02), (-1.0, 0.05))
+    params = params.replace(**NEVER_ARMED)
     assert _energy_error(params, SimConfig.accurate(**FREE), *start) < 1e-9
     # the default (2.5 ms) setting drifts about 1e-11 here
     assert _energy_error(params, SimConfig(**FREE), *start) < 1e-9
@@ -54,7 +56,7 @@ def test_energy_conserved_in_unforced_frictionless_swing(params):
 
 def test_motor_work_balances_the_energy_change_and_is_split_into_parts():
     P = CLASSIC.vector()
-    sim = Simulator(CLASSIC, PILLAR, 1, config=SimConfig.accurate(**FREE))
+    sim = Simulator(CLASSIC.replace(**NEVER_ARMED), PILLAR, 1, config=SimConfig.accurate(**FREE))
     sim.reset((0.6, 0.02), (-1.0, 0.05))
     total = 0.0
     e0 = model.energy(P, *sim.state(0), 0.0)
@@ -138,11 +140,11 @@ def _failure(params, terrain, q0, qd0, torque=None, **cfg):
 
 
 def test_fall_by_hip_height_and_by_stance_angle():
-    still = {"arm_distance": 2.0, "retract": 0.5}  # a swing foot that never touches down
-    reason, res = _failure(CLASSIC, "flat", (0.0, 0.5), (0.0, 0.0), fall_height=0.8, **still)
+    still = CLASSIC.replace(arm_distance=2.0, retract=0.5)  # a swing foot that never lands
+    reason, res = _failure(still, "flat", (0.0, 0.5), (0.0, 0.0), fall_height=0.8)
     assert reason == "fall" and res.failure_time > 0
     assert CLASSIC.l * math.cos(res.q[-1, 1]) < 0.8 * CLASSIC.l
-    reason, res = _failure(CLASSIC, "flat", (0.0, 0.5), (0.0, 0.0), q2_limit=0.6, **still)
+    reason, res = _failure(still, "flat", (0.0, 0.5), (0.0, 0.0), q2_limit=0.6)
     assert reason == "fall" and res.q[-1, 1] > 0.6
 
 
@@ -317,3 +319,21 @@ def test_per_walker_terrain_and_masked_reset():
         sim.reset((0.3, 0.5), (0.0, 0.0), index=0)  # retracted swing foot in the ground
     with pytest.raises(ValueError, match="hip"):
         Simulator(CLASSIC, "flat", 1, config=SimConfig(fall_height=0.9)).reset((0.0, 0.6), (0, 0))
+
+
+def test_foot_geometry_comes_from_each_walkers_robot():
+    # swing foot 0.395 m ahead of the stance foot and 0.04 m above the ground (l = 1 m)
+    q, qd = (0.4, 0.1), (0.0, 0.0)
+    sim = Simulator([CLASSIC, CLASSIC.replace(arm_distance=0.5)], "flat", 2)
+    sim.reset(q, qd)
+    assert sim.armed.tolist() == [1, 0]
+    # full-length swing foot 0.04 m below the ground: retracted by 5 % of l it clears it
+    Simulator(CLASSIC, "flat").reset((0.4, 0.3), qd)
+    with pytest.raises(ValueError, match="retracted swing foot"):
+        Simulator(CLASSIC.replace(retract=0.0), "flat").reset((0.4, 0.3), qd)
+    # the former SimConfig fields name their replacement
+    for key in ("retract", "arm_distance"):
+        with pytest.raises(ValueError, match=rf"SimConfig\.{key} moved.*RobotParams\.{key}"):
+            SimConfig(**{key: 0.1})
+        with pytest.raises(ValueError, match=rf"RobotParams\.{key}"):
+            SimConfig.accurate(**{key: 0.1})

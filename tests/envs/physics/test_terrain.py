@@ -5,7 +5,15 @@ import math
 import numpy as np
 import pytest
 
-from envs.physics.terrain import Terrain, as_terrain, terrain_height
+from envs.physics.terrain import (
+    NAMED_KINDS,
+    TERRAIN_CONFIG_DIR,
+    Terrain,
+    as_terrain,
+    available_terrains,
+    terrain_height,
+    terrain_spec,
+)
 
 ALL_KINDS = [
     Terrain.flat(0.1),
@@ -62,7 +70,7 @@ def test_heights_slopes_and_faces():
     [
         ({"kind": "volcano"}, "unknown terrain kind"),
         ({"height": 0.0}, "kind"),
-        ("nonsense", "unknown terrain kind"),
+        ("nonsense", "unknown terrain 'nonsense'; allowed"),
         ({"kind": "slope", "angle": 0.7}, "angle"),
         ({"kind": "slope", "angle": float("nan")}, "angle"),
         ({"kind": "slope", "angle": 0.1, "tilt": 2}, "bad fields"),
@@ -85,3 +93,69 @@ def test_bad_specs_raise_clear_errors(spec, match):
 def test_blocks_without_a_seed_is_an_error():
     with pytest.raises(ValueError, match="seed"):
         as_terrain("blocks")
+
+
+def test_a_shipped_course_name_resolves_to_its_file():
+    assert {"flat", "paper_stairs", "rough_blocks", "classic_slope"} <= set(available_terrains())
+    assert terrain_spec("paper_stairs")["kind"] == "stairs"
+    stairs = as_terrain("paper_stairs")
+    assert stairs == Terrain.from_yaml(TERRAIN_CONFIG_DIR / "paper_stairs.yaml")
+    assert stairs == Terrain.stairs([0.40, 0.62], [-0.03, -0.03])
+    assert as_terrain("classic_slope") == Terrain.slope(-0.0525)
+    # a random course without a seed is a generator: a spec, not a Terrain
+    assert terrain_spec("rough_blocks") == {
+        "kind": "blocks", "start": 0.3, "length": 12.0, "width_range": [0.1, 0.3],
+        "height_range": [-0.0075, 0.0075],
+    }  # fmt: skip
+    with pytest.raises(ValueError, match="needs a seed"):
+        as_terrain("rough_blocks")
+
+
+def test_flat_is_a_course_and_a_kind_with_one_meaning():
+    assert terrain_spec("flat") == {"kind": "flat", "height": 0.0}  # configs/terrains/flat.yaml
+    flat = as_terrain("flat")
+    assert flat == Terrain.flat() and flat.to_dict() == Terrain.flat().to_dict()
+
+
+def test_a_yaml_path_resolves_to_its_spec(tmp_path):
+    course = Terrain.staircase(0.5, 3, 0.3, 0.02)
+    for name in ("course.yaml", "course.yml"):
+        course.to_yaml(tmp_path / name)
+        assert terrain_spec(str(tmp_path / name)) == course.to_dict()
+        assert as_terrain(tmp_path / name) == course  # a path object too
+    with pytest.raises(ValueError, match="does not exist"):
+        terrain_spec(str(tmp_path / "missing.yaml"))
+    (tmp_path / "list.yaml").write_text("[1, 2]\n")
+    with pytest.raises(ValueError, match="spec mapping"):
+        terrain_spec(str(tmp_path / "list.yaml"))
+
+
+def test_a_kind_name_gets_default_fields():
+    assert as_terrain("slope") == Terrain.slope(0.0)
+    assert terrain_spec("slope") == {"kind": "slope", "angle": 0.0}
+    for kind in ("blocks", "piecewise"):
+        assert terrain_spec(kind) == {"kind": kind}  # a generator with default fields
+        with pytest.raises(ValueError, match="needs a seed"):
+            as_terrain(kind)
+    assert set(NAMED_KINDS) == {"flat", "slope", "blocks", "piecewise"}
+    # no shipped course shadows a kind, except "flat" (the same ground)
+    assert set(available_terrains()) & set(NAMED_KINDS) == {"flat"}
+
+
+def test_terrain_arguments_other_than_names_pass_through():
+    course = Terrain.flat(0.2)
+    assert terrain_spec(course) is course and as_terrain(course) is course
+    spec = {"kind": "stairs", "edges": [0.4], "rises": [0.1]}
+    copy = terrain_spec(spec)
+    assert copy == spec and copy is not spec and copy["edges"] is not spec["edges"]
+    assert as_terrain(spec) == Terrain.stairs([0.4], [0.1])
+
+
+@pytest.mark.parametrize("name", ["stairs", "points", "no_such_course", "Flat", ""])
+def test_an_unknown_name_lists_what_is_allowed(name):
+    with pytest.raises(ValueError, match="unknown terrain") as err:
+        as_terrain(name)
+    for allowed in ("configs/terrains", "paper_stairs", "YAML", "'slope'", "spec dict"):
+        assert allowed in str(err.value)
+    with pytest.raises(ValueError, match="must be a Terrain"):
+        terrain_spec(3.0)
