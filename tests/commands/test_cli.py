@@ -259,3 +259,19 @@ def test_demo_help_keeps_its_bullets_and_shows_defaults(capsys):
     ][: len(bullets)] and len(bullets) == 5
     assert "(default: 0)" in out and "(default: outputs/demo)" in out
     assert "three steps on the flat" in " ".join(out.split())
+
+
+# ---------------------------------------------------------------- numba's first compilation
+def test_the_first_compilation_is_announced_once(tmp_path, monkeypatch, capsys):
+    from commands.cli import COMPILING, announce_compilation, kernels_need_compiling
+
+    (tmp_path / "fresh_kernels.py").write_text(
+        "from numba import njit\n\n\n@njit(cache=True)\ndef twice(x):\n    return 2 * x\n"
+    )
+    monkeypatch.syspath_prepend(str(tmp_path))
+    assert kernels_need_compiling(["fresh_kernels"])
+    assert announce_compilation(["fresh_kernels"])
+    assert capsys.readouterr().out == COMPILING + "\n"
+    assert sys.modules["fresh_kernels"].twice(2.0) == 4.0  # compiles and caches
+    assert not kernels_need_compiling(["fresh_kernels"])
+    assert not announce_compilation(["fresh_kernels"]) and capsys.readouterr().out == ""
