@@ -261,7 +261,7 @@ def announce_compilation(modules: Iterable[str], console: object | None = None) 
     if console is None:
         print(COMPILING, flush=True)
     else:
-        console.print(COMPILING, markup=False)
+        console.print(COMPILING, markup=False, soft_wrap=True)
     return True
 
 

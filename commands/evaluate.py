@@ -44,7 +44,14 @@ from agents.evaluate import (
 from agents.policies import BASELINES
 from agents.runs import find_manifest
 from agents.train import set_threads
-from commands.cli import env_id, int_range, output_file
+from commands.cli import (
+    CONTROLLER_KERNELS,
+    SIMULATOR_KERNELS,
+    announce_compilation,
+    env_id,
+    int_range,
+    output_file,
+)
 
 ALGOS = ("ppo", "sac", "td3", "a2c")
 
@@ -247,6 +254,9 @@ def run(args: argparse.Namespace) -> int:
         raise ValueError("--algo and --vecnormalize apply to trained models, not to baselines")
     curve = _learning_curve_path(args)
     kwargs = dict(args.env_kwargs) if args.env_kwargs else None
+    announce_compilation(
+        SIMULATOR_KERNELS + (CONTROLLER_KERNELS if args.policy != "passive" else ())
+    )
     try:
         ev = evaluate(
             args.policy,
