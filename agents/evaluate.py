@@ -237,9 +237,12 @@ def check_vecnormalize(path: str | Path) -> None:
     try:
         stats = load_vecnormalize(path)
     except Exception as exc:  # unpickling a damaged file can raise almost anything
+        detail = " ".join(str(exc).split())
+        if isinstance(exc, ValueError) and str(path) in detail:
+            raise ValueError(detail) from exc  # already says which file and why
         raise ValueError(
             f"{path}: not VecNormalize statistics saved by stable-baselines3 (damaged or "
-            f"another kind of file: {type(exc).__name__}: {' '.join(str(exc).split())})"
+            f"another kind of file: {type(exc).__name__}: {detail})"
         ) from exc
     if not callable(getattr(stats, "normalize_obs", None)):
         raise ValueError(f"{path}: holds a {type(stats).__name__}, not VecNormalize statistics")

@@ -269,7 +269,8 @@ def run(args: argparse.Namespace) -> int:
             algo=args.algo,
         )
     except ValueError as exc:
-        if trained and not args.algo and "cannot tell the algorithm" in str(exc):
+        message = str(exc)
+        if trained and "cannot tell the algorithm" in message and "--algo" not in message:
             raise ValueError(f"{exc}; name it with --algo") from exc
         raise
     seeds = f"{ev.episodes[0].seed}-{ev.episodes[-1].seed}"

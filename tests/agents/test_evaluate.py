@@ -144,7 +144,7 @@ def test_damaged_statistics_and_models_are_value_errors(tmp_path: Path):
     with pytest.raises(ValueError, match="vecnormalize.pkl: not VecNormalize statistics"):
         check_vecnormalize(pkl)
     pkl.write_bytes(b"\x80\x04\x95")
-    with pytest.raises(ValueError, match="not VecNormalize statistics.*UnpicklingError"):
+    with pytest.raises(ValueError, match="vecnormalize.pkl: .*VecNormalize statistics"):
         check_vecnormalize(pkl)
     (tmp_path / "model.zip").write_text("text")
     with pytest.raises(ValueError, match="not a zip archive"):

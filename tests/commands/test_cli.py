@@ -129,12 +129,12 @@ def _cases() -> list[tuple[str, list[str], tuple[str, ...]]]:
         (
             "evaluate-stats-beside-model",
             ["evaluate", "--policy", "{model}", "--env", FLAT],
-            ("{stats}", "not VecNormalize statistics"),
+            ("{stats}", "VecNormalize statistics"),
         ),
         (
             "evaluate-stats-truncated",
             ["evaluate", "--policy", "{model}", "--env", FLAT, "--vecnormalize", "{truncated}"],
-            ("{truncated}", "not VecNormalize statistics", "truncated"),
+            ("{truncated}", "VecNormalize statistics", "truncated"),
         ),
         (
             "evaluate-model-not-zip",
