@@ -20,6 +20,7 @@ import textwrap
 import traceback
 from collections.abc import Callable, Iterable, Sequence
 from pathlib import Path
+from typing import Any
 
 import yaml
 
@@ -113,7 +114,9 @@ def one_line(message: object) -> str:
 
 
 # ---------------------------------------------------------------- argument types
-def _number(kind: type, lo: float | None, hi: float | None, lo_open: bool, hi_open: bool):
+def _number(
+    kind: type, lo: float | None, hi: float | None, lo_open: bool, hi_open: bool
+) -> Callable[[str], Any]:
     """An argparse type: a ``kind`` (int or float) within the given bounds."""
     name = "an integer" if kind is int else "a number"
     if lo is not None and hi is not None:

@@ -136,7 +136,7 @@ def render_table(
             buf = io.StringIO()
             Console(file=buf, width=width, highlight=False).print(table)
             return buf.getvalue()
-    lines = [title] if title else []
+    lines = textwrap.wrap(title, width, subsequent_indent="    ") if title else []
     for row in rows:
         lines += textwrap.wrap(f"{row[0]} on {row[1]}", width, subsequent_indent="    ")
         metrics = ", ".join(f"{name} {value}" for name, value in zip(TABLE_COLUMNS[2:], row[2:]))

@@ -126,7 +126,7 @@ COMPARE_LIKE = [
 
 @pytest.mark.parametrize("terminal", [True, False], ids=["terminal", "piped"])
 def test_tables_are_readable_in_80_columns(terminal: bool):
-    title = "held-out seeds from 1000, 50 episodes"
+    title = "runs/sac_residual_rough_hard_s0/best_model.zip on roughwalk/CompassGaitRough-v0, seeds"
     text = render_table(COMPARE_LIKE, title=title, width=80, terminal=terminal)
     assert "…" not in text and "..." not in text
     assert max(len(line) for line in text.splitlines()) <= 80
