@@ -20,6 +20,9 @@ from __future__ import annotations
 
 import csv
 import json
+import os
+import tempfile
+import zipfile
 from collections import Counter
 from collections.abc import Sequence
 from dataclasses import asdict, dataclass, field
@@ -28,10 +31,12 @@ from typing import Any
 
 import gymnasium as gym
 import numpy as np
+import yaml
 
 import envs  # noqa: F401  (registers the roughwalk ids)
 from agents.config import EVAL_SEED_OFFSET, MAX_SEED, TEST_SEED, ConfigError
 from agents.policies import BASELINES, Policy
+from agents.runs import find_vecnormalize, load_vecnormalize
 from agents.trained import TrainedPolicy, load_policy
 
 
@@ -183,11 +188,112 @@ def run_episode(
     )
 
 
+def make_env(env_id: str, env_kwargs: dict[str, Any] | None = None) -> gym.Env:
+    """``gym.make(env_id, **env_kwargs)`` for a roughwalk env, with bad input as ``ValueError``.
+
+    Args:
+        env_id: a registered ``roughwalk/...`` Gymnasium id.
+        env_kwargs: keyword arguments of ``gym.make`` (settings of ``envs.CompassGaitEnv``).
+
+    Raises:
+        ConfigError: ``env_id`` is not registered, or not a roughwalk env.
+        ValueError: a keyword argument is unknown or has a bad value, or a settings file it
+            names is not valid YAML.
+    """
+    ours = sorted(k for k in gym.registry if k.startswith("roughwalk/"))
+    if env_id not in ours:
+        what = "not a roughwalk env" if env_id in gym.registry else "unknown environment id"
+        raise ConfigError(f"{what} {env_id!r}; registered: {', '.join(ours)}")
+    env_kwargs = dict(env_kwargs or {})
+    try:
+        env = gym.make(env_id, **env_kwargs)
+    except yaml.YAMLError as exc:
+        mark = getattr(exc, "problem_mark", None)
+        where = f" ({mark.name}, line {mark.line + 1})" if mark is not None else ""
+        problem = getattr(exc, "problem", None) or " ".join(str(exc).split())
+        raise ValueError(
+            f"{env_id} with {env_kwargs}: a settings file is not valid YAML{where}: {problem}"
+        ) from exc
+    except TypeError as exc:  # an unknown keyword, or a value of the wrong kind
+        raise ValueError(f"{env_id} with {env_kwargs}: {exc}") from exc
+    if not isinstance(env.unwrapped, envs.CompassGaitEnv):
+        env.close()
+        raise ConfigError(f"{env_id} is not a roughwalk env (envs.CompassGaitEnv)")
+    return env
+
+
+def check_vecnormalize(path: str | Path) -> None:
+    """Check that ``path`` holds ``VecNormalize`` statistics saved by stable-baselines3.
+
+    Loading unpickles the file, which can run code: load only files you trust.
+
+    Raises:
+        FileNotFoundError: no such file.
+        ValueError: the file is damaged or holds something else.
+    """
+    path = Path(path)
+    if not path.is_file():
+        raise FileNotFoundError(f"VecNormalize statistics not found: {path}")
+    try:
+        stats = load_vecnormalize(path)
+    except Exception as exc:  # unpickling a damaged file can raise almost anything
+        detail = " ".join(str(exc).split())
+        if isinstance(exc, ValueError) and str(path) in detail:
+            raise ValueError(detail) from exc  # already says which file and why
+        raise ValueError(
+            f"{path}: not VecNormalize statistics saved by stable-baselines3 (damaged or "
+            f"another kind of file: {type(exc).__name__}: {detail})"
+        ) from exc
+    if not callable(getattr(stats, "normalize_obs", None)):
+        raise ValueError(f"{path}: holds a {type(stats).__name__}, not VecNormalize statistics")
+
+
+def load_trained(
+    model_path: str | Path, vecnormalize: str | Path | None = None, algo: str | None = None
+) -> TrainedPolicy:
+    """A trained model with its statistics, damaged files reported as ``ValueError``.
+
+    Loading unpickles the model file and the statistics file, which can run code: load only
+    files you trust. Nothing but these two files (and the run's manifest) is read.
+
+    Args:
+        model_path: the model file (``.zip``) saved by stable-baselines3.
+        vecnormalize: its ``VecNormalize`` statistics (default: the file saved beside it).
+        algo: its algorithm (``ppo``, ``sac``, ...; default: from its run or the file).
+
+    Raises:
+        FileNotFoundError: a file is missing.
+        ValueError: a file is damaged, not what it should be, or the algorithm is unknown.
+    """
+    path = Path(model_path)
+    if not path.is_file():
+        raise FileNotFoundError(f"model file not found: {path}")
+    if not zipfile.is_zipfile(path):
+        raise ValueError(f"{path}: not a model saved by stable-baselines3 (not a zip archive)")
+    vn = Path(vecnormalize) if vecnormalize is not None else find_vecnormalize(path)
+    if vn is not None:
+        check_vecnormalize(vn)
+    kwargs: dict[str, Any] = {"vecnormalize": vn}
+    if algo is not None:
+        kwargs["algo"] = algo
+    try:
+        policy = load_policy(str(path), **kwargs)
+    except (ValueError, OSError):
+        raise
+    except Exception as exc:  # unpickling a damaged file can raise almost anything
+        raise ValueError(
+            f"{path}: a damaged model file ({type(exc).__name__}: {' '.join(str(exc).split())})"
+        ) from exc
+    assert isinstance(policy, TrainedPolicy)
+    return policy
+
+
 def make_eval_env(
     policy_spec: str,
     env_id: str | None,
     env_kwargs: dict[str, Any] | None = None,
     vecnormalize: str | None = None,
+    algo: str | None = None,
 ) -> tuple[gym.Env, Policy, str, dict[str, Any]]:
     """The env (with the agent's wrappers) and the policy for ``policy_spec``.
 
@@ -196,25 +302,22 @@ def make_eval_env(
         env_id: Gymnasium id; None for a trained model's own env (from its run).
         env_kwargs: keyword arguments of ``gym.make`` (default: a trained model's own).
         vecnormalize: a trained model's ``VecNormalize`` statistics (default: beside it).
+        algo: a trained model's algorithm (default: from its run or the file).
 
     Returns:
         ``(env, policy, env_id, env_kwargs)``, with the env id and keyword arguments used.
     """
     trained = None
     if policy_spec not in BASELINES:
-        trained = load_policy(policy_spec, vecnormalize=vecnormalize)
-        assert isinstance(trained, TrainedPolicy)
+        trained = load_trained(policy_spec, vecnormalize=vecnormalize, algo=algo)
         if env_id is None and trained.config is not None:
             env_id = trained.config.env_id
             if env_kwargs is None:
                 env_kwargs = trained.config.env_kwargs
     if env_id is None:
         raise ConfigError("--env is required (no run manifest to take it from)")
-    if env_id not in gym.registry:
-        ours = sorted(k for k in gym.registry if k.startswith("roughwalk/"))
-        raise ConfigError(f"unknown environment id {env_id!r}; registered: {', '.join(ours)}")
     env_kwargs = dict(env_kwargs or {})
-    env = gym.make(env_id, **env_kwargs)
+    env = make_env(env_id, env_kwargs)
     if trained is not None:
         env = trained.wrap_env(env)
         if env.observation_space.shape != trained.model.observation_space.shape:
@@ -235,6 +338,7 @@ def evaluate(
     env_kwargs: dict[str, Any] | None = None,
     vecnormalize: str | None = None,
     progress: bool = False,
+    algo: str | None = None,
 ) -> Evaluation:
     """Evaluate a baseline (``passive``, ``pd``, ``reference``) or a trained model (path).
 
@@ -246,9 +350,12 @@ def evaluate(
         env_kwargs: keyword arguments of ``gym.make`` (default: a trained model's own).
         vecnormalize: a trained model's ``VecNormalize`` statistics (default: beside it).
         progress: show a progress bar.
+        algo: a trained model's algorithm (default: from its run or the file).
     """
     seeds = eval_seeds(seed, episodes)
-    env, policy, env_id, env_kwargs = make_eval_env(policy_spec, env_id, env_kwargs, vecnormalize)
+    env, policy, env_id, env_kwargs = make_eval_env(
+        policy_spec, env_id, env_kwargs, vecnormalize, algo
+    )
     mass, g, _ = _robot(env)
     iterator: Any = seeds
     if progress:
@@ -262,26 +369,43 @@ def evaluate(
     return Evaluation(policy_spec, env_id, env_kwargs, results, mass, g)
 
 
+def _write_atomically(path: str | Path, write: Any) -> None:
+    """Call ``write(file)`` on a temporary file beside ``path``, then rename it to ``path``:
+    an interrupted or failed write leaves no partial file."""
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
+    try:
+        with os.fdopen(fd, "w", newline="") as fh:
+            write(fh)
+        os.replace(tmp, path)
+    except BaseException:
+        Path(tmp).unlink(missing_ok=True)
+        raise
+
+
 def write_json(evaluations: Sequence[Evaluation], path: str | Path) -> None:
     """Write the ``evaluations`` with their per-episode results to ``path`` as JSON (one
-    object for one evaluation, else a list)."""
-    Path(path).parent.mkdir(parents=True, exist_ok=True)
+    object for one evaluation, else a list); the file appears complete or not at all."""
     data = [ev.to_dict() for ev in evaluations]
-    Path(path).write_text(json.dumps(data[0] if len(data) == 1 else data, indent=2) + "\n")
+    text = json.dumps(data[0] if len(data) == 1 else data, indent=2) + "\n"
+    _write_atomically(path, lambda fh: fh.write(text))
 
 
 def write_csv(evaluations: Sequence[Evaluation], path: str | Path) -> None:
     """Write the episodes of the ``evaluations`` to ``path`` as CSV: one row per episode,
-    with the policy and env in the first columns."""
-    Path(path).parent.mkdir(parents=True, exist_ok=True)
+    with the policy and env in the first columns; the file appears complete or not at all."""
     names = [f.name for f in EpisodeResult.__dataclass_fields__.values()]
-    with open(path, "w", newline="") as fh:
+
+    def write(fh: Any) -> None:
         writer = csv.writer(fh)
         writer.writerow(["policy", "env_id", "env_kwargs", *names])
         for ev in evaluations:
             kw = json.dumps(ev.env_kwargs, sort_keys=True)
             for e in ev.episodes:
                 writer.writerow([ev.policy, ev.env_id, kw, *(getattr(e, n) for n in names)])
+
+    _write_atomically(path, write)
 
 
 def read_monitor_logs(folder: str | Path) -> np.ndarray:
@@ -304,36 +428,58 @@ def read_monitor_logs(folder: str | Path) -> np.ndarray:
     return np.concatenate(parts)
 
 
+def learning_curve_data(run_dir: str | Path) -> tuple[np.ndarray, dict[str, np.ndarray] | None]:
+    """What the learning curve of the run in ``run_dir`` plots: the training episodes (rows
+    ``(return, length, t)``, see :func:`read_monitor_logs`) and the periodic evaluations
+    (``timesteps``, ``results``), or None without any.
+
+    Raises:
+        ValueError: the run has neither training episodes nor evaluations (e.g. a run shorter
+            than one episode and one evaluation period), or its evaluations file is damaged.
+    """
+    run_dir = Path(run_dir)
+    episodes = read_monitor_logs(run_dir / "monitor")
+    evals = None
+    path = run_dir / "eval" / "evaluations.npz"
+    if path.is_file():
+        try:
+            with np.load(path) as data:
+                evals = {k: np.asarray(data[k]) for k in ("timesteps", "results")}
+        except Exception as exc:  # a damaged or foreign archive
+            raise ValueError(f"{path}: not an evaluations file of stable-baselines3") from exc
+        if len(evals["timesteps"]) == 0:
+            evals = None
+    if len(episodes) == 0 and evals is None:
+        raise ValueError(
+            f"{run_dir}: no learning curve to plot: the run logged no finished training episode "
+            "(monitor/) and no periodic evaluation (eval/evaluations.npz)"
+        )
+    return episodes, evals
+
+
 def plot_learning_curve(run_dir: str | Path, out: str | Path) -> Path:
     """Plot the training episode returns and the periodic evaluation returns of the run in
-    ``run_dir`` against env steps; writes the PNG ``out`` and returns its path."""
+    ``run_dir`` against env steps; writes the PNG ``out`` and returns its path (raises
+    ``ValueError`` when there is nothing to plot, see :func:`learning_curve_data`)."""
     from matplotlib.figure import Figure
 
     run_dir = Path(run_dir)
-    fig = Figure(figsize=(7, 4))
+    episodes, evals = learning_curve_data(run_dir)
+    fig = Figure(figsize=(7, 4.4), layout="constrained")
     ax = fig.subplots()
-    plotted = False
-    episodes = read_monitor_logs(run_dir / "monitor")
     if len(episodes):
         steps = np.cumsum(episodes[:, 1])
         window = max(1, len(episodes) // 50)
         ret = np.convolve(episodes[:, 0], np.ones(window) / window, mode="valid")
         ax.plot(steps[window - 1 :], ret, lw=1, label=f"training (mean of {window} episodes)")
-        plotted = True
-    evals = run_dir / "eval" / "evaluations.npz"
-    if evals.is_file():
-        data = np.load(evals)
-        mean, std = data["results"].mean(axis=1), data["results"].std(axis=1)
-        ax.errorbar(data["timesteps"], mean, yerr=std, fmt="o-", ms=3, label="held-out evaluation")
-        plotted = True
-    if not plotted:
-        raise FileNotFoundError(f"{run_dir}: no monitor logs or evaluations to plot")
+    if evals is not None:
+        mean, std = evals["results"].mean(axis=1), evals["results"].std(axis=1)
+        ax.errorbar(evals["timesteps"], mean, yerr=std, fmt="o-", ms=3, label="held-out evaluation")
     ax.set_xlabel("environment steps")
     ax.set_ylabel("episode return")
     ax.set_title(run_dir.name)
     ax.grid(alpha=0.3)
-    ax.legend()
-    fig.tight_layout()
+    fig.legend(loc="outside lower center", ncol=2, frameon=False)
     out = Path(out)
     out.parent.mkdir(parents=True, exist_ok=True)
     fig.savefig(out, dpi=120)

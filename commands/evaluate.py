@@ -1,34 +1,59 @@
 """Evaluate a policy on held-out courses: success, footsteps, distance, speed, cost of transport.
 
-Seed split: training envs are seeded below 1,000,000 (``agents.config.TRAIN_SEED_LIMIT``);
-evaluation episode ``k`` resets its env with seed ``1,000,000 + S + k`` (``--seed S``, S >= 0),
-so evaluation courses are never the ones a training run starts from. Seeds 1,000,000 to
-1,000,999 are the validation courses of the periodic evaluation during training (which selects
-``best_model.zip``); ``--seed`` defaults to 1000, past them. The absolute seed of every
-episode is recorded in the JSON/CSV output: ``env.reset(seed=...)`` replays it.
+Seed split: training envs are seeded below 1,000,000. Evaluation episode k resets its env with
+seed 1,000,000 + S + k (--seed S), so evaluation courses are never the ones a training run
+starts from. Seeds 1,000,000 to 1,000,999 are the validation courses of the periodic
+evaluation during training (which selects best_model.zip); --seed defaults to 1000, past them.
+The absolute seed of every episode is in the JSON/CSV output: env.reset(seed=...) replays it.
 
-Metrics per episode: success (no failure before the episode ended, i.e. the time limit was
-reached), footsteps taken (until failure or time limit), distance walked [m], mean speed
-[m/s] (distance over episode duration), motor work [J] (absolute, ``int |tau q1dot| dt``), and
-cost of transport ``work / (m g distance)`` with ``m`` the robot's total mass. Summary: means
-over episodes; the summary cost of transport is total work over total ``m g distance``.
+Metrics per episode: success (no failure before the time limit), footsteps taken, distance
+walked [m], mean speed [m/s], motor work [J] (absolute) and cost of transport (CoT: work over
+m g distance, m the robot's total mass). The table shows means over the episodes; its CoT is
+the total work over the total m g distance.
+
+Security: a trained model (.zip) and its VecNormalize statistics (.pkl) are Python pickles;
+loading them can run arbitrary code. Evaluate only files you trust. The command loads the
+model you name, the statistics beside it (or the --vecnormalize file) and its run's
+manifest.json, nothing else.
 """
 
 from __future__ import annotations
 
 import argparse
+import io
+import sys
+import textwrap
 from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
+from rich import box
 from rich.console import Console
+from rich.markup import escape
 from rich.table import Table
 
-from agents.config import TEST_SEED, ConfigError, parse_assignments
-from agents.evaluate import Evaluation, evaluate, plot_learning_curve, write_csv, write_json
+from agents.config import TEST_SEED, parse_assignments
+from agents.evaluate import (
+    Evaluation,
+    evaluate,
+    learning_curve_data,
+    plot_learning_curve,
+    write_csv,
+    write_json,
+)
 from agents.policies import BASELINES
 from agents.runs import find_manifest
 from agents.train import set_threads
+from commands.cli import (
+    CONTROLLER_KERNELS,
+    SIMULATOR_KERNELS,
+    announce_compilation,
+    env_id,
+    int_range,
+    output_file,
+)
+
+ALGOS = ("ppo", "sac", "td3", "a2c")
 
 
 def _fmt(value: Any, spec: str) -> str:
@@ -40,7 +65,7 @@ def summary_row(ev: Evaluation) -> list[str]:
     """The table row of evaluation ``ev``: policy, env, success, footsteps, distance, speed,
     CoT, failures."""
     s = ev.summary
-    kw = ",".join(f"{k}={v}" for k, v in ev.env_kwargs.items())
+    kw = ", ".join(f"{k}={v}" for k, v in ev.env_kwargs.items())
     failures = ", ".join(f"{k} {v}" for k, v in sorted(s["failure_reasons"].items())) or "-"
     return [
         ev.policy
@@ -61,21 +86,89 @@ TABLE_COLUMNS = (
     "env",
     "success",
     "footsteps",
-    "distance (m)",
-    "speed (m/s)",
+    "distance [m]",
+    "speed [m/s]",
     "CoT",
     "failures",
 )
+# the table's headers: the same names, the long ones on two lines
+TABLE_HEADERS = tuple(
+    {"footsteps": "foot-\nsteps", "distance [m]": "dist.\n[m]"}.get(c, c.replace(" [", "\n["))
+    for c in TABLE_COLUMNS
+)
+
+
+def render_table(
+    evaluations: Sequence[Evaluation],
+    title: str | None = None,
+    width: int = 80,
+    terminal: bool = True,
+) -> str:
+    """The summary of ``evaluations`` as text ``width`` columns wide, nothing cut off.
+
+    A table (one row per evaluation) on a ``terminal`` wide enough for it; otherwise, and
+    always when not on a terminal (piped, redirected), one block per evaluation:
+    ``POLICY on ENV`` and its metrics (named as in :data:`TABLE_COLUMNS`), wrapped to the
+    width at spaces.
+
+    Args:
+        evaluations: the evaluations, one row each.
+        title: the line above them.
+        width: the width to fit [characters].
+        terminal: whether the text goes to a terminal.
+    """
+    rows = [summary_row(ev) for ev in evaluations]
+    table = Table(
+        title=escape(title) if title else None,
+        box=box.SIMPLE_HEAD,
+        show_edge=False,
+        pad_edge=False,
+        padding=(0, 1, 0, 0),
+    )
+    for i, col in enumerate(TABLE_HEADERS):
+        table.add_column(escape(col), justify="right" if 1 < i < 7 else "left", no_wrap=True)
+    for row in rows:
+        table.add_row(*(escape(c) for c in row))
+    if terminal:
+        buf = io.StringIO()
+        Console(file=buf, width=10_000, highlight=False).print(table)
+        if max(len(line.rstrip()) for line in buf.getvalue().splitlines()) <= width:
+            buf = io.StringIO()
+            Console(file=buf, width=width, highlight=False).print(table)
+            return buf.getvalue()
+    lines = textwrap.wrap(title, width, subsequent_indent="    ") if title else []
+    for row in rows:
+        lines += textwrap.wrap(f"{row[0]} on {row[1]}", width, subsequent_indent="    ")
+        metrics = ", ".join(f"{name} {value}" for name, value in zip(TABLE_COLUMNS[2:], row[2:]))
+        lines += textwrap.wrap(metrics, width, initial_indent="  ", subsequent_indent="  ")
+    return "\n".join(lines) + "\n"
 
 
 def print_table(evaluations: Sequence[Evaluation], title: str | None = None) -> None:
-    """Print a rich table with one row per evaluation, under ``title``."""
-    table = Table(title=title)
-    for i, col in enumerate(TABLE_COLUMNS):
-        table.add_column(col, justify="right" if 1 < i < 7 else "left")
-    for ev in evaluations:
-        table.add_row(*summary_row(ev))
-    Console().print(table)
+    """Print the summary of ``evaluations`` under ``title`` (see :func:`render_table`): a table
+    on a terminal wide enough, else one block per evaluation."""
+    console = Console()
+    terminal = sys.stdout.isatty()
+    sys.stdout.write(render_table(evaluations, title, console.width, terminal))
+
+
+def _env_kwarg(text: str) -> tuple[str, Any]:
+    """An argparse ``type=``: one ``KEY=VALUE`` env keyword argument (the value as YAML)."""
+    try:
+        ((key, value),) = parse_assignments([text]).items()
+    except Exception as exc:  # ConfigError, or YAML's error on a malformed value
+        problem = getattr(exc, "problem", None) or " ".join(str(exc).split())
+        raise argparse.ArgumentTypeError(
+            f"{text!r} is not KEY=VALUE with a YAML value ({problem})"
+        ) from None
+    return key, value
+
+
+def _algo(text: str) -> str:
+    """An argparse ``type=``: an algorithm name."""
+    if text.lower() not in ALGOS:
+        raise argparse.ArgumentTypeError(f"unknown algorithm {text!r}; allowed: {', '.join(ALGOS)}")
+    return text.lower()
 
 
 def configure(parser: argparse.ArgumentParser) -> None:
@@ -83,39 +176,88 @@ def configure(parser: argparse.ArgumentParser) -> None:
     parser.add_argument(
         "--policy",
         required=True,
-        help=f"one of {', '.join(BASELINES)}, or the path of a trained model (.zip)",
+        help=f"one of {', '.join(BASELINES)}, or the path of a trained model (.zip; a pickle: "
+        "load only files you trust)",
     )
-    parser.add_argument("--env", help="env id (default for a trained model: its training env)")
     parser.add_argument(
-        "--env-kwargs", nargs="*", metavar="KEY=VALUE", help="env keyword arguments (YAML values)"
+        "--env", type=env_id, help="env id (default for a trained model: its training env)"
     )
-    parser.add_argument("--episodes", type=int, default=20, help="number of episodes")
+    parser.add_argument(
+        "--env-kwargs",
+        nargs="*",
+        type=_env_kwarg,
+        metavar="KEY=VALUE",
+        help="env keyword arguments, values in YAML (default for a trained model: its own)",
+    )
+    parser.add_argument("--episodes", type=int_range(1), default=20, help="number of episodes")
     parser.add_argument(
         "--seed",
-        type=int,
+        type=int_range(0),
         default=TEST_SEED,
-        help=f"episode k uses reset seed 1,000,000 + SEED + k (default {TEST_SEED})",
+        help="episode k uses reset seed 1,000,000 + SEED + k",
     )
-    parser.add_argument("--vecnormalize", help="VecNormalize statistics (default: beside model)")
-    parser.add_argument("--json", metavar="FILE", help="write summary and episodes as JSON")
-    parser.add_argument("--csv", metavar="FILE", help="write one row per episode as CSV")
+    parser.add_argument(
+        "--vecnormalize",
+        metavar="PKL",
+        help="the model's VecNormalize statistics (a pickle: load only files you trust; "
+        "default: the file saved beside the model)",
+    )
+    parser.add_argument(
+        "--algo",
+        type=_algo,
+        help=f"the model's algorithm ({', '.join(ALGOS)}; default: from its run or its file), "
+        "for a model moved out of its run folder",
+    )
+    parser.add_argument(
+        "--json", type=output_file, metavar="FILE", help="write summary and episodes as JSON"
+    )
+    parser.add_argument(
+        "--csv", type=output_file, metavar="FILE", help="write one row per episode as CSV"
+    )
     parser.add_argument(
         "--plot-learning-curve",
         nargs="?",
         const="",
         metavar="PNG",
-        help="plot the trained model's learning curve (default: learning_curve.png in its run)",
+        help="plot the trained model's learning curve (default file: learning_curve.png in "
+        "its run)",
     )
     parser.add_argument("--no-progress", action="store_true", help="no progress bar")
 
 
-def run(args: argparse.Namespace) -> int:
-    """``roughwalk evaluate`` with the parsed ``args``; returns the exit status (2: bad
-    arguments)."""
-    if args.policy not in BASELINES:
-        set_threads(1)
+def _learning_curve_path(args: argparse.Namespace) -> tuple[Path, Path] | None:
+    """``(run folder, PNG)`` of ``--plot-learning-curve``, checked before any episode runs."""
+    if args.plot_learning_curve is None:
+        return None
+    if args.policy in BASELINES:
+        raise ValueError("--plot-learning-curve: needs a trained model, not a baseline")
+    manifest = find_manifest(args.policy)
+    run_dir = manifest.parent if manifest else Path(args.policy).parent
+    learning_curve_data(run_dir)
+    out = Path(args.plot_learning_curve or run_dir / "learning_curve.png")
     try:
-        kwargs = parse_assignments(args.env_kwargs) if args.env_kwargs else None
+        output_file(str(out))
+    except argparse.ArgumentTypeError as exc:
+        raise ValueError(f"--plot-learning-curve: {exc}") from None
+    return run_dir, out
+
+
+def run(args: argparse.Namespace) -> int:
+    """``roughwalk evaluate`` with the parsed ``args``; returns the exit status (bad input
+    raises ``ValueError``/``OSError`` before any episode runs)."""
+    trained = args.policy not in BASELINES
+    if trained:
+        set_threads(1)
+        if not Path(args.policy).is_file():
+            raise FileNotFoundError(f"--policy: model file not found: {args.policy}")
+    elif args.algo or args.vecnormalize:
+        raise ValueError("--algo and --vecnormalize apply to trained models, not to baselines")
+    curve = _learning_curve_path(args)
+    kwargs = dict(args.env_kwargs) if args.env_kwargs else None
+    announce_compilation(
+        SIMULATOR_KERNELS + (CONTROLLER_KERNELS if args.policy != "passive" else ())
+    )
+    try:
         ev = evaluate(
             args.policy,
             args.env,
@@ -124,22 +266,19 @@ def run(args: argparse.Namespace) -> int:
             env_kwargs=kwargs,
             vecnormalize=args.vecnormalize,
             progress=not args.no_progress,
+            algo=args.algo,
         )
-    except (ConfigError, ValueError, FileNotFoundError) as exc:
-        print(f"roughwalk evaluate: error: {exc}")
-        return 2
+    except ValueError as exc:
+        message = str(exc)
+        if trained and "cannot tell the algorithm" in message and "--algo" not in message:
+            raise ValueError(f"{exc}; name it with --algo") from exc
+        raise
     seeds = f"{ev.episodes[0].seed}-{ev.episodes[-1].seed}"
     print_table([ev], title=f"{ev.policy} on {ev.env_id}, held-out seeds {seeds}")
     if args.json:
         write_json([ev], args.json)
     if args.csv:
         write_csv([ev], args.csv)
-    if args.plot_learning_curve is not None:
-        if args.policy in BASELINES:
-            print("roughwalk evaluate: error: --plot-learning-curve needs a trained model")
-            return 2
-        manifest = find_manifest(args.policy)
-        run_dir = manifest.parent if manifest else Path(args.policy).parent
-        out = args.plot_learning_curve or run_dir / "learning_curve.png"
-        print(f"learning curve: {plot_learning_curve(run_dir, out)}")
+    if curve is not None:
+        print(f"learning curve: {plot_learning_curve(*curve)}")
     return 0

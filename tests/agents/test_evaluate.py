@@ -124,3 +124,69 @@ def test_trained_model_evaluation_and_learning_curve(trained_ppo_run: Path, tmp_
     # a checkpoint is evaluated with its own normalisation statistics
     ckpt = next((trained_ppo_run / "checkpoints").glob("rl_model_*_steps.zip"))
     evaluate(str(ckpt), None, episodes=1, seed=0)
+
+
+def test_envs_other_than_roughwalk_ones_are_refused():
+    from agents.config import ConfigError
+    from agents.evaluate import make_env
+
+    with pytest.raises(ConfigError, match="'CartPole-v1'.*registered: roughwalk/"):
+        make_env("CartPole-v1")
+    with pytest.raises(ValueError, match="bogus"):
+        make_env(FLAT, {"bogus": 1})
+
+
+def test_damaged_statistics_and_models_are_value_errors(tmp_path: Path):
+    from agents.evaluate import check_vecnormalize, load_trained
+
+    pkl = tmp_path / "vecnormalize.pkl"
+    pkl.write_bytes(b"\x80\x04K\x01.")  # a valid pickle of the number 1
+    with pytest.raises(ValueError, match="vecnormalize.pkl: not VecNormalize statistics"):
+        check_vecnormalize(pkl)
+    pkl.write_bytes(b"\x80\x04\x95")
+    with pytest.raises(ValueError, match="vecnormalize.pkl: .*VecNormalize statistics"):
+        check_vecnormalize(pkl)
+    (tmp_path / "model.zip").write_text("text")
+    with pytest.raises(ValueError, match="not a zip archive"):
+        load_trained(tmp_path / "model.zip")
+    with pytest.raises(FileNotFoundError):
+        load_trained(tmp_path / "other.zip")
+
+
+def test_outputs_appear_whole_or_not_at_all(tmp_path: Path):
+    ev = evaluate("passive", SLOPE, episodes=1, seed=0)
+    out = tmp_path / "deep" / "out.csv"
+    write_csv([ev], out)
+    before = out.read_text()
+
+    class Broken(Evaluation):
+        @property
+        def episodes(self):  # fails halfway through writing
+            raise RuntimeError("disk gone")
+
+        @episodes.setter
+        def episodes(self, value):
+            pass
+
+    broken = Broken("passive", SLOPE, {}, [], 1.0, 9.81, summary={"x": 1})
+    with pytest.raises(RuntimeError, match="disk gone"):
+        write_csv([broken], out)
+    assert out.read_text() == before  # the previous file is intact
+    assert sorted(p.name for p in out.parent.iterdir()) == ["out.csv"]  # no temporary file
+
+
+def test_a_run_without_episodes_or_evaluations_has_no_learning_curve(tmp_path: Path):
+    from agents.evaluate import learning_curve_data
+
+    (tmp_path / "monitor").mkdir()
+    (tmp_path / "monitor" / "0.monitor.csv").write_text('#{"t_start": 0}\nr,l,t\n')
+    (tmp_path / "eval").mkdir()
+    with pytest.raises(ValueError, match="no learning curve to plot"):
+        learning_curve_data(tmp_path)
+    with pytest.raises(ValueError, match="no learning curve to plot"):
+        plot_learning_curve(tmp_path, tmp_path / "curve.png")
+    assert not (tmp_path / "curve.png").exists()
+    np.savez(tmp_path / "eval" / "evaluations.npz", timesteps=[100, 200], results=[[1.0], [2.0]])
+    episodes, evals = learning_curve_data(tmp_path)
+    assert len(episodes) == 0 and list(evals["timesteps"]) == [100, 200]
+    assert plot_learning_curve(tmp_path, tmp_path / "curve.png").stat().st_size > 5000

@@ -1,9 +1,16 @@
-"""``roughwalk demo``: the paper's experiment runs, prints its table and writes its figures."""
+"""``roughwalk demo``: the paper's experiment runs for the whole episode, prints its table with
+units and writes its figures and a small GIF."""
 
 import argparse
 
+import gymnasium as gym
+import pytest
+from PIL import Image
+
 from commands import demo
 from commands.cli import main
+
+STAIRS = "roughwalk/CompassGaitStairs-v0"
 
 
 def test_demo_writes_table_and_figures(tmp_path, capsys):
@@ -12,26 +19,54 @@ def test_demo_writes_table_and_figures(tmp_path, capsys):
     args = parser.parse_args(["--duration", "2.5", "--output", str(tmp_path)])
     code = demo.run(args)
     out = capsys.readouterr().out
-    assert "thd start" in out and "Riccati" in out
+    assert out.count("[rad/s]") == 2 and "[rad]" in out and "[ms]" in out  # units in headers
     for name in ("cartoon.png", "q2.png", "q1.png", "velocities.png"):
         p = tmp_path / name
         assert p.exists() and p.stat().st_size > 5000
         assert p.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+        assert f"wrote {p}" in out
     assert code == 0, out
+
+
+def test_the_default_duration_is_the_whole_episode(capsys):
+    env = gym.make(STAIRS)
+    limit = env.spec.max_episode_steps * env.unwrapped.dt
+    assert demo.episode_duration(env) == pytest.approx(10.0) == limit
+    assert main(["demo", "--no-figures"]) == 0
+    out = capsys.readouterr().out
+    assert f"in {limit:.2f} s" in out
+    rows = [line for line in out.splitlines() if line.startswith("│")]
+    # three steps on the flat, one down each stair, and on: 11 touchdowns in 10 s; the step in
+    # progress at the time limit is the last row, marked as such
+    assert "walked: 11 footsteps" in out
+    assert "unfinished" in rows[-1] or "unfinished" in rows[-2]
+
+
+def test_the_walk_takes_three_steps_on_the_flat_before_the_stairs():
+    res = demo.rollout(STAIRS, seed=0, duration=4.0)
+    feet = res["foot"]
+    heights = [y for i, (x, y) in enumerate(feet) if i == 0 or (feet[i - 1] != feet[i]).any()]
+    assert heights[:4] == [0.0, 0.0, 0.0, 0.0]  # the start foot and three touchdowns on top
+    assert heights[4] == pytest.approx(-0.03)  # then the first stair
 
 
 def test_demo_rollout_and_table_rows():
     res = demo.rollout("roughwalk/CompassGaitFlat-v0", seed=1, duration=1.5)
-    rows = demo.step_table(res["records"])
-    assert len(rows) >= 2
+    rows = demo.step_table(res["records"], last="unfinished")
+    assert len(rows) >= 2 and len(rows[0]) == len(demo.STEP_COLUMNS)
+    assert rows[-1][-1] == "unfinished" and rows[0][-1] == ""
     h = res["history"]
     assert h["x_hat"].shape[1] == 4 and h["nominal"].shape[1] == 3
     assert res["failure"] is None
 
 
-def test_demo_is_a_cli_subcommand(tmp_path, capsys):
-    code = main(
-        ["demo", "--duration", "1.0", "--no-figures", "--env", "roughwalk/CompassGaitFlat-v0"]
-    )
-    assert code == 0
-    assert "footsteps" in capsys.readouterr().out
+def test_the_gif_is_small(tmp_path, capsys):
+    argv = ["demo", "--duration", "0.5", "--gif", "--output", str(tmp_path)]
+    assert main([*argv, "--env", "roughwalk/CompassGaitFlat-v0"]) == 0
+    gif = tmp_path / "walk.gif"
+    assert f"wrote {gif}" in capsys.readouterr().out
+    with Image.open(gif) as im:
+        # 0.5 s at 5 ms per tick, a frame every 8 ticks (25 per simulated second)
+        assert im.n_frames == 13 and im.size == (demo.GIF_WIDTH, 320)
+        assert im.info["duration"] == 40
+    assert gif.stat().st_size < 60_000

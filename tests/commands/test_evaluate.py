@@ -1,29 +1,66 @@
-"""``roughwalk evaluate``: the table, JSON/CSV outputs, errors, trained models, learning curve."""
+"""``roughwalk evaluate``: the summary, JSON/CSV outputs, inputs checked before any episode,
+trained models, the learning curve, and tables readable in 80 columns."""
 
 from __future__ import annotations
 
 import csv
+import importlib
 import json
+import shutil
 from pathlib import Path
 
+import pytest
+
 from agents.config import EVAL_SEED_OFFSET
+from agents.evaluate import EpisodeResult, Evaluation, load_trained
 from commands.cli import main
+from commands.evaluate import TABLE_COLUMNS, render_table, summary_row
 
 SLOPE = "roughwalk/CompassGaitSlope-v0"
 FLAT = "roughwalk/CompassGaitFlat-v0"
 
 
-def test_cli_evaluate(tmp_path: Path, capsys):
-    out = tmp_path / "e.json"
+@pytest.fixture
+def episode_count(monkeypatch: pytest.MonkeyPatch) -> list[int]:
+    """Counts the episodes run (``agents.evaluate.run_episode`` calls)."""
+    calls = [0]
+    module = importlib.import_module("agents.evaluate")
+    real = module.run_episode
+
+    def counted(*args, **kwargs):
+        calls[0] += 1
+        return real(*args, **kwargs)
+
+    monkeypatch.setattr(module, "run_episode", counted)
+    return calls
+
+
+def test_cli_evaluate(tmp_path: Path, capsys, episode_count):
+    out = tmp_path / "sub" / "e.json"
     argv = ["evaluate", "--policy", "passive", "--env", SLOPE, "--episodes", "2"]
     assert main([*argv, "--seed", "3", "--json", str(out), "--no-progress"]) == 0
     printed = capsys.readouterr().out
-    assert "success" in printed and "100%" in printed
+    assert "success 100% (2)" in printed and "distance [m]" in printed
     assert json.loads(out.read_text())["episodes"][0]["seed"] == EVAL_SEED_OFFSET + 3
-    assert main(["evaluate", "--policy", "passive", "--env", "roughwalk/Nope-v0"]) == 2
-    assert "unknown environment id" in capsys.readouterr().out
-    assert main(["evaluate", "--policy", str(tmp_path / "missing.zip"), "--env", FLAT]) == 2
-    assert "model file not found" in capsys.readouterr().out
+    assert episode_count[0] == 2
+    assert [p.name for p in out.parent.iterdir()] == ["e.json"]  # no temporary file left
+
+
+def test_output_paths_are_checked_before_any_episode(tmp_path: Path, capsys, episode_count):
+    blocker = tmp_path / "a_file"
+    blocker.write_text("x")
+    argv = ["evaluate", "--policy", "passive", "--env", FLAT, "--episodes", "3", "--no-progress"]
+    for bad in (["--json", str(blocker / "e.json")], ["--csv", str(tmp_path)]):
+        assert main([*argv, *bad]) == 2
+        assert "error: argument --" in capsys.readouterr().err
+    # a model whose run has nothing to plot fails before its episodes too
+    run = tmp_path / "run"
+    run.mkdir()
+    shutil.make_archive(str(run / "model"), "zip", root_dir=run)
+    assert main([*argv, "--policy", str(run / "model.zip"), "--plot-learning-curve"]) == 2
+    assert "no learning curve" in capsys.readouterr().err
+    assert episode_count[0] == 0
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["a_file", "run"]
 
 
 def test_cli_evaluates_a_trained_model_and_plots_its_learning_curve(
@@ -43,6 +80,74 @@ def test_cli_evaluates_a_trained_model_and_plots_its_learning_curve(
     # without a file name the curve goes into the run
     assert main([*argv, "--plot-learning-curve"]) == 0
     assert (cli_trained_run / "learning_curve.png").is_file()
-    baseline = ["evaluate", "--policy", "passive", "--env", FLAT, "--episodes", "1"]
-    assert main([*baseline, "--no-progress", "--plot-learning-curve"]) == 2
-    assert "--plot-learning-curve needs a trained model" in capsys.readouterr().out
+
+
+def test_a_model_moved_out_of_its_run_names_its_algorithm(cli_trained_run: Path, tmp_path: Path):
+    for name in ("model.zip", "vecnormalize.pkl"):
+        shutil.copy(cli_trained_run / name, tmp_path / name)
+    policy = load_trained(tmp_path / "model.zip", algo="ppo")
+    assert type(policy.model).__name__ == "PPO"
+    assert policy.vecnormalize_path == tmp_path / "vecnormalize.pkl"
+
+
+# ---------------------------------------------------------------- tables in 80 columns
+def _evaluation(policy: str, env_id: str, kwargs: dict, failures: list[str | None]) -> Evaluation:
+    """An evaluation of made-up episodes (one per entry of ``failures``)."""
+    episodes = [
+        EpisodeResult(
+            seed=EVAL_SEED_OFFSET + k,
+            success=f is None,
+            failure=f,
+            steps=2000,
+            duration=10.0,
+            footsteps=11,
+            distance=1.83,
+            speed=0.183,
+            motor_work=2.0,
+            cost_of_transport=0.012,
+            episode_return=1.5,
+        )
+        for k, f in enumerate(failures)
+    ]
+    return Evaluation(policy, env_id, kwargs, episodes, total_mass=10.0, gravity=9.81)
+
+
+COMPARE_LIKE = [
+    _evaluation("reference", "roughwalk/CompassGaitStairs-v0", {}, [None] * 50),
+    _evaluation(
+        "runs/sac_residual_rough_hard_s0/best_model.zip",
+        "roughwalk/CompassGaitRough-v0",
+        {"difficulty": 2.0, "max_episode_steps": 3000},
+        [None, "fall", "trip", "slip", "stuck", "liftoff"] * 5,
+    ),
+    _evaluation("passive", "roughwalk/CompassGaitRough-v0", {"difficulty": 1.0}, ["fall"] * 50),
+]
+
+
+@pytest.mark.parametrize("terminal", [True, False], ids=["terminal", "piped"])
+def test_tables_are_readable_in_80_columns(terminal: bool):
+    title = "runs/sac_residual_rough_hard_s0/best_model.zip on roughwalk/CompassGaitRough-v0, seeds"
+    text = render_table(COMPARE_LIKE, title=title, width=80, terminal=terminal)
+    assert "…" not in text and "..." not in text
+    assert max(len(line) for line in text.splitlines()) <= 80
+    flat = " ".join(text.split())
+    for ev in COMPARE_LIKE:
+        for cell in summary_row(ev):  # every cell whole, on one line or wrapped at spaces
+            assert " ".join(cell.split()) in flat, cell
+    for name in TABLE_COLUMNS[2:]:
+        assert name in text
+    assert "sac_residual_rough_hard_s0/best_model on CompassGaitRough-v0" in text
+
+
+def test_a_table_that_fits_the_terminal_stays_a_table():
+    short = [COMPARE_LIKE[0]]
+    text = render_table(short, title="t", width=80, terminal=True)
+    assert max(len(line) for line in text.splitlines()) <= 80
+    header = next(line for line in text.splitlines() if line.startswith("policy"))
+    assert header.split() == ["policy", "env", "success", *"steps [m] [m/s] CoT failures".split()]
+    row = next(line for line in text.splitlines() if line.startswith("reference"))
+    assert row.split() == " ".join(summary_row(short[0])).split()
+    # the same piped: one block per evaluation, the same numbers
+    piped = render_table(short, title="t", width=120, terminal=False)
+    assert piped.splitlines()[1] == "reference on CompassGaitStairs-v0"
+    assert "success 100% (50)" in piped

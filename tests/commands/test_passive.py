@@ -18,3 +18,11 @@ def test_passive_walk_converges_to_the_limit_cycle(capsys):
     dists = [float(m) for m in re.findall(r"(\d\.\d+e[-+]\d+)\W*$", out, flags=re.M)]
     assert len(dists) >= 10
     assert dists[-1] < 0.05 * dists[0]
+
+
+def test_the_table_has_units_and_a_fall_before_the_first_step_is_said_so(capsys):
+    assert main(["passive", "--steps", "3", "--perturb", "0.2", "--seed", "4"]) == 1
+    out = " ".join(capsys.readouterr().out.split())
+    assert "time [s]" in out and "step length [m]" in out and "q2dot+ [rad/s]" in out
+    assert "no step: the walker failed 0.415 s after the start; FAILED: trip" in out
+    assert "nan" not in out
