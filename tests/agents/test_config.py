@@ -98,7 +98,11 @@ def test_unknown_env_id():
     ("section", "change", "message"),
     [
         ("roughwalk/CompassGaitFlat-v0", {"n_stepz": 64}, r"unknown hyperparameter\(s\) n_stepz"),
-        ("roughwalk/CompassGaitFlat-v0", {"n_timesteps": -5}, "n_timesteps must be a positive"),
+        (
+            "roughwalk/CompassGaitFlat-v0",
+            {"n_timesteps": -5},
+            "n_timesteps must be a whole number >= 1, got -5",
+        ),
         ("roughwalk/CompassGaitFlat-v0", {"learning_rate": "cos_1e-3"}, "lin_<number>"),
         ("roughwalk/CompassGaitFlat-v0", {"env_wrapper": "agents.nowhere.Wrap"}, "cannot import"),
         ("roughwalk/CompassGaitFlat-v0", {"normalize": "yes"}, "normalize must be"),

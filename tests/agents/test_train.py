@@ -90,26 +90,26 @@ def test_frame_stack_is_applied_in_training_and_in_evaluation(smoke, tmp_path: P
             stacked, _ = stacker.update(norm, np.array([False]), [{}])
 
 
-def test_resume_from_checkpoint_continues_the_run(smoke, tmp_path: Path):
+def test_resuming_a_finished_run_continues_into_a_new_run_folder(smoke, tmp_path: Path):
     cfg = smoke(CONFIG_DIR / "ppo_stairs.yaml", timesteps=2048)
     run = train(cfg, log_dir=tmp_path, progress_bar=False)
     ckpt = run / "checkpoints" / "rl_model_1024_steps.zip"
     stats_at_ckpt = load_vecnormalize(find_vecnormalize(ckpt)).obs_rms.count
-    final_before = (run / "model.zip").stat().st_mtime_ns
+    before = {p: p.read_bytes() for p in run.rglob("*") if p.is_file()}
     resumed = train(cfg, log_dir=None, resume=ckpt, progress_bar=False)
-    assert resumed == run
-    manifest = json.loads((run / "manifest.json").read_text())
+    # the finished run is kept as it was; the continuation is a new run beside it
+    assert resumed == tmp_path / f"{run.name}_2"
+    assert {p: p.read_bytes() for p in run.rglob("*") if p.is_file()} == before
+    manifest = json.loads((resumed / "manifest.json").read_text())
     assert manifest["resumed_from"] == [str(ckpt)]
+    assert manifest["status"] == "finished"
     assert manifest["num_timesteps"] == cfg.n_timesteps
-    assert (run / "model.zip").stat().st_mtime_ns > final_before
     # the normalisation statistics continued from the checkpoint's (not from scratch)
-    stats_end = load_vecnormalize(run / "vecnormalize.pkl").obs_rms.count
+    stats_end = load_vecnormalize(resumed / "vecnormalize.pkl").obs_rms.count
     assert stats_end == pytest.approx(stats_at_ckpt + 1024, abs=2)
-    # the evaluation history and the training-episode logs before the checkpoint are kept
-    evals = np.load(run / "eval" / "evaluations.npz")
-    assert list(evals["timesteps"]) == [1024, cfg.n_timesteps]
-    assert any((run / "monitor").glob("*.monitor.csv"))
-    assert any((run / "monitor" / "resume1").glob("*.monitor.csv"))
+    evals = np.load(resumed / "eval" / "evaluations.npz")
+    assert list(evals["timesteps"]) == [cfg.n_timesteps]
+    assert any((resumed / "monitor").glob("*.monitor.csv"))
 
 
 def test_periodic_evaluation_uses_the_same_held_out_courses(smoke, tmp_path: Path):
