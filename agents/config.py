@@ -19,9 +19,10 @@ One file describes one training run. It holds two top-level sections:
 
 ``<env id>`` (rl-zoo3's hyperparameter format): ``policy``, ``n_timesteps``, ``n_envs``,
 ``normalize``, ``frame_stack``, ``env_kwargs``, ``env_wrapper``, ``policy_kwargs`` and the
-algorithm's own keyword arguments, with rl-zoo3's ``lin_<value>`` linear schedules. Because the
-env id is a top-level key, the same file works with
-``python -m rl_zoo3.train --algo ppo --env <env id> --gym-packages envs --conf-file <file>``,
+algorithm's own keyword arguments, with rl-zoo3's ``lin_<value>`` linear schedules; each is
+checked against the table of known hyperparameters and their ranges in ``agents.hyperparams``
+before stable-baselines3 sees it. Because the env id is a top-level key, the same file works
+with ``python -m rl_zoo3.train --algo ppo --env <env id> --gym-packages envs --conf-file <file>``,
 which ignores the ``run`` section.
 """
 

@@ -12,7 +12,6 @@ without unpickling anything.
 
 from __future__ import annotations
 
-import json
 from pathlib import Path
 from typing import Any
 
@@ -28,6 +27,7 @@ from agents.runs import (
     load_vecnormalize,
     model_algo,
     model_data,
+    read_manifest,
     vecnormalize_path,
     zoo_config,
     zoo_run_files,
@@ -76,9 +76,7 @@ class TrainedPolicy:
             if recorded is not None and recorded != algo:
                 raise ValueError(f"--algo {algo}: {self.path} is a {recorded.upper()} model")
         manifest_path = find_manifest(self.path)
-        self.manifest: dict[str, Any] = (
-            json.loads(manifest_path.read_text()) if manifest_path else {}
-        )
+        self.manifest: dict[str, Any] = read_manifest(manifest_path.parent) if manifest_path else {}
         self.config = None
         if "config" in self.manifest:
             self.config = config_from_dict(self.manifest["config"], manifest_path)
@@ -100,7 +98,10 @@ class TrainedPolicy:
                 f"statistics beside it (expected {vecnormalize_path(self.path).name}); "
                 "copy them with the model or name them (--vecnormalize)"
             )
-        self.model = algorithm_class(algo).load(self.path, device="cpu")
+        try:
+            self.model = algorithm_class(algo).load(self.path, device="cpu")
+        except Exception as exc:  # noqa: BLE001  (a corrupted zip can raise anything)
+            raise ValueError(f"{self.path}: cannot load the {algo.upper()} model ({exc})") from None
         self.vecnormalize_path = vn_path
         self.obs_norm = load_vecnormalize(vn_path) if vn_path else None
         self.frame_stack = self.config.frame_stack if self.config else None

@@ -29,11 +29,10 @@ run code: resume only from files you trust.
 from __future__ import annotations
 
 import argparse
-import json
 from pathlib import Path
 
 from agents.config import ConfigError, config_from_dict, load_config, parse_assignments
-from agents.runs import find_manifest
+from agents.runs import find_manifest, read_manifest
 from agents.train import train
 
 
@@ -99,11 +98,10 @@ def _run_config(checkpoint: str) -> tuple[dict, Path]:
             f"--resume {checkpoint}: no run manifest beside it or above it to take the config "
             "from; give the config file"
         )
-    try:
-        manifest = json.loads(manifest_path.read_text())
-        return manifest["config"], Path(manifest.get("config_file") or manifest_path)
-    except (json.JSONDecodeError, KeyError, TypeError) as exc:
-        raise ValueError(f"{manifest_path}: not a valid run manifest ({exc})") from None
+    manifest = read_manifest(manifest_path.parent)
+    if not isinstance(manifest.get("config"), dict):
+        raise ValueError(f"{manifest_path}: not a valid run manifest (no config)")
+    return manifest["config"], Path(manifest.get("config_file") or manifest_path)
 
 
 def run(args: argparse.Namespace) -> int:

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import os
 import subprocess
 import sys
 from pathlib import Path
@@ -132,7 +133,10 @@ def test_rl_zoo3_reads_our_configs(tmp_path: Path):
     cmd += ["--conf-file", str(CONFIG_DIR / "ppo_rough.yaml"), "-n", "256", "--seed", "1"]
     cmd += ["-params", "n_envs:2", "n_steps:64", "batch_size:64", "n_epochs:1"]
     cmd += ["--eval-freq", "-1", "--log-folder", str(tmp_path)]
-    out = subprocess.run(cmd, capture_output=True, text=True, timeout=300)
+    # SB3's logger folder of a run without TensorBoard: by default a new one in the system's
+    # temp folder
+    env = {**os.environ, "SB3_LOGDIR": str(tmp_path / "sb3_log")}
+    out = subprocess.run(cmd, capture_output=True, text=True, timeout=300, env=env)
     assert out.returncode == 0, out.stderr[-2000:]
     assert "'difficulty': 1.0" in out.stdout  # env_kwargs of the file were used
     saved = list(tmp_path.rglob("roughwalk-CompassGaitRough-v0.zip"))
