@@ -429,8 +429,8 @@ def _resume_target(point: ResumePoint, log_dir: str | Path | None) -> tuple[Path
         return None, Path(log_dir)
     if point.run_dir is None:
         raise ValueError(
-            f"--resume {point.path}: it belongs to no run folder (no {point.path.name} in a "
-            "folder with manifest.json); give --log-dir for the new run"
+            f"--resume {point.path}: not inside a run folder (no manifest.json beside it or "
+            "above it); give --log-dir for the new run"
         )
     if run_status(read_manifest(point.run_dir)) == FINISHED:
         return None, point.run_dir.parent  # a finished run is kept as it is
