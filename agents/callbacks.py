@@ -1,19 +1,92 @@
-"""stable-baselines3 callbacks for roughwalk training runs."""
+"""stable-baselines3 callbacks for roughwalk training runs: a progress bar to the steps the
+run will really end at, checkpoints and best models written all or nothing, and the held-out
+periodic evaluation, reported one line per evaluation."""
 
 from __future__ import annotations
 
+import os
+import warnings
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 from stable_baselines3.common.callbacks import BaseCallback, EvalCallback
 
+from agents.runs import save_checkpoint, save_model
 
-class SaveVecNormalizeOnBest(BaseCallback):
-    """Save the ``VecNormalize`` statistics beside ``best_model.zip`` (``callback_on_new_best``).
+
+class ProgressBar(BaseCallback):
+    """A tqdm/rich progress bar over ``total`` env steps (the steps the run will end at, not
+    the requested budget: PPO collects whole rollouts).
+
+    Unlike SB3's ``progress_bar=True``, it can be closed when training stops with an
+    exception (:meth:`close`), so that no half-open live display is left behind.
 
     Args:
-        save_path: the folder of ``best_model.zip``.
+        total: env steps of this training (from its start).
+    """
+
+    def __init__(self, total: int) -> None:
+        super().__init__()
+        self.total = int(total)
+        self.pbar: Any = None
+        self._start = 0
+
+    def _on_training_start(self) -> None:
+        from tqdm import TqdmExperimentalWarning
+
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", TqdmExperimentalWarning)
+            from tqdm.rich import tqdm
+
+            self.pbar = tqdm(total=self.total)
+        self._start = self.model.num_timesteps
+
+    def _on_step(self) -> bool:
+        done = min(self.model.num_timesteps - self._start, self.total)
+        self.pbar.update(done - self.pbar.n)
+        return True
+
+    def _on_training_end(self) -> None:
+        self.close()
+
+    def close(self) -> None:
+        """Stop the bar (idempotent)."""
+        if self.pbar is not None:
+            self.pbar.refresh()
+            self.pbar.close()
+            self.pbar = None
+
+
+class Checkpoint(BaseCallback):
+    """Every ``save_freq`` calls (vec-env steps), save ``<folder>/rl_model_<N>_steps.zip``
+    with its ``VecNormalize`` statistics and, if asked, its replay buffer, each file all or
+    nothing (``agents.runs.save_checkpoint``).
+
+    Args:
+        save_freq: calls between checkpoints (env steps / number of envs).
+        folder: the checkpoint folder.
+        replay_buffer: also save the replay buffer (off-policy algorithms).
+    """
+
+    def __init__(self, save_freq: int, folder: str | Path, replay_buffer: bool = False) -> None:
+        super().__init__()
+        self.save_freq = max(int(save_freq), 1)
+        self.folder = Path(folder)
+        self.replay_buffer = replay_buffer
+
+    def _on_step(self) -> bool:
+        if self.n_calls % self.save_freq == 0:
+            save_checkpoint(self.model, self.folder, self.replay_buffer)
+        return True
+
+
+class SaveBestModel(BaseCallback):
+    """Save ``best_model.zip`` and its ``VecNormalize`` statistics ``best_vecnormalize.pkl``
+    (``callback_on_new_best`` of the evaluation), all or nothing.
+
+    Args:
+        save_path: the run folder.
     """
 
     def __init__(self, save_path: str | Path) -> None:
@@ -21,10 +94,11 @@ class SaveVecNormalizeOnBest(BaseCallback):
         self.save_path = Path(save_path)
 
     def _on_step(self) -> bool:
-        vn = self.model.get_vec_normalize_env()
-        if vn is not None:
-            vn.save(str(self.save_path / "best_vecnormalize.pkl"))
+        save_model(self.model, self.save_path / "best_model.zip")
         return True
+
+
+SaveVecNormalizeOnBest = SaveBestModel  # the name of earlier versions
 
 
 class HeldOutEvalCallback(EvalCallback):
@@ -33,18 +107,26 @@ class HeldOutEvalCallback(EvalCallback):
     Before every evaluation the eval env is reseeded with ``seed`` (>= the evaluation seed
     offset), so all evaluations of a run use the same held-out courses. Besides SB3's
     ``eval/mean_reward`` it logs ``eval/success_rate`` (episodes ending without failure),
-    ``eval/footsteps`` and ``eval/distance`` [m], read from the env's final ``info``.
+    ``eval/footsteps`` and ``eval/distance`` [m], read from the env's final ``info``, and
+    prints one line per evaluation. ``evaluations.npz`` in ``log_path`` is rewritten all or
+    nothing after each evaluation.
 
     Args:
         eval_env: the evaluation env (an SB3 ``VecEnv``).
         seed: the seed of the evaluation courses (>= ``agents.config.EVAL_SEED_OFFSET``).
+        report: print one line per evaluation.
         kwargs: the other arguments of SB3's ``EvalCallback``.
     """
 
-    def __init__(self, eval_env: Any, seed: int, **kwargs: Any) -> None:
+    def __init__(self, eval_env: Any, seed: int, report: bool = True, **kwargs: Any) -> None:
         super().__init__(eval_env, **kwargs)
         self.seed = seed
+        self.report = report
         self._walk: list[tuple[bool, float, float]] = []
+        self._final: str | None = None
+        if self.log_path is not None:  # SB3 writes <log_path>.npz; renamed after each write
+            self._final = self.log_path + ".npz"
+            self.log_path = os.path.join(os.path.dirname(self.log_path), ".evaluations.partial")
 
     def _log_success_callback(self, locals_: dict[str, Any], globals_: dict[str, Any]) -> None:
         if locals_["done"]:
@@ -62,11 +144,27 @@ class HeldOutEvalCallback(EvalCallback):
         if due:
             self.eval_env.seed(self.seed)
             self._walk = []
+        best_before = self.best_mean_reward
         keep_going = super()._on_step()
-        if due and self._walk:
+        if not due:
+            return keep_going
+        if self._final is not None and os.path.exists(self.log_path + ".npz"):
+            os.replace(self.log_path + ".npz", self._final)
+        line = f"eval at {self.num_timesteps:,} steps: reward {self.last_mean_reward:.2f}"
+        if self.evaluations_results:
+            line += f" +- {np.std(self.evaluations_results[-1]):.2f}"
+        if self._walk:
             ok, steps, dist = (np.asarray(c, dtype=float) for c in zip(*self._walk))
             self.logger.record("eval/success_rate", float(ok.mean()))
             self.logger.record("eval/footsteps", float(steps.mean()))
             self.logger.record("eval/distance", float(dist.mean()))
             self.logger.dump(self.num_timesteps)
+            line += (
+                f", success {int(ok.sum())}/{len(ok)}, footsteps {steps.mean():.1f}, "
+                f"distance {dist.mean():.2f} m"
+            )
+        if self.best_mean_reward > best_before:
+            line += " (new best: best_model.zip)"
+        if self.report:
+            print(line, flush=True)
         return keep_going

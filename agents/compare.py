@@ -2,12 +2,13 @@
 
 For each terrain setting (flat, the paper's stairs, rough blocks at two difficulty levels)
 :func:`compare` evaluates the baselines (passive, PD, reference controller) and, for every
-config in ``configs/agents`` whose env matches the setting, trains the agent (unless its run
-already has a final model) and evaluates it (the best model of the periodic evaluations on the
+config in ``configs/agents`` whose env matches the setting, trains the agent (unless the log
+folder already has a finished run of it: the latest one is reused; an interrupted run of the
+same config is resumed) and evaluates it (the best model of the periodic evaluations on the
 validation courses, else the final one; see :func:`chosen_model`), all on the same held-out
 test seeds. It writes ``compare.json`` (every episode), ``compare.csv`` and ``compare.md`` (the
-summary table with the command reproducing each row and the training budget; see
-:func:`markdown_table`) to its output folder.
+summary table with the command reproducing each row and the env steps each agent was really
+trained for; see :func:`markdown_table`) to its output folder.
 """
 
 from __future__ import annotations
@@ -18,8 +19,17 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from agents.config import TEST_SEED, AgentConfig, load_config
+from agents.config import TEST_SEED, AgentConfig, ConfigError, load_config
 from agents.evaluate import Evaluation, evaluate, write_csv
+from agents.runs import (
+    FINISHED,
+    INTERRUPTED,
+    atomic_write,
+    atomic_write_text,
+    check_writable,
+    latest_run,
+    read_manifest,
+)
 from agents.train import run_dir_for, train
 from configs import CONFIG_DIR as _CONFIGS
 
@@ -108,27 +118,69 @@ def chosen_model(run_dir: Path) -> Path:
 
 
 def budget(cfg: AgentConfig, run_dir: Path) -> str:
-    """Training budget of a run: env steps, and wall time from its manifest."""
-    text = f"{cfg.n_timesteps:,} steps"
-    manifest = run_dir / "manifest.json"
-    if manifest.is_file():
-        m = json.loads(manifest.read_text())
-        if "started" in m and "finished" in m:
-            wall = dt.datetime.fromisoformat(m["finished"]) - dt.datetime.fromisoformat(
-                m["started"]
-            )
-            text += f", {wall.total_seconds() / 60:.0f} min"
+    """What a run was trained for: the env steps it really trained (its manifest's
+    ``num_timesteps``; the config's budget for a run not trained yet) and its training time."""
+    m = read_manifest(run_dir) if (run_dir / "manifest.json").is_file() else {}
+    text = f"{int(m.get('num_timesteps', cfg.n_timesteps)):,} steps"
+    if "train_seconds" in m:
+        text += f", {m['train_seconds'] / 60:.0f} min"
+    elif "started" in m and "finished" in m:
+        wall = dt.datetime.fromisoformat(m["finished"]) - dt.datetime.fromisoformat(m["started"])
+        text += f", {wall.total_seconds() / 60:.0f} min"
     return text
 
 
 def load_agent_configs(
     config_dir: Path, only: str | None, hyperparams: dict[str, Any] | None
 ) -> list[AgentConfig]:
-    """Every config of ``config_dir`` (names containing ``only``, if given)."""
+    """Every config of ``config_dir`` (names containing ``only``, if given).
+
+    Raises:
+        ConfigError: no such folder, no config in it, none matching ``only``, a bad config.
+    """
+    config_dir = Path(config_dir)
+    if not config_dir.is_dir():
+        raise ConfigError(f"--configs {config_dir}: no such folder")
     paths = sorted(config_dir.glob("*.yaml"))
+    if not paths:
+        raise ConfigError(f"--configs {config_dir}: no agent configs (*.yaml) in it")
     if only:
-        paths = [p for p in paths if only in p.stem]
+        chosen = [p for p in paths if only in p.stem]
+        if not chosen:
+            names = ", ".join(p.stem for p in paths)
+            raise ConfigError(f"--only {only}: matches none of the configs ({names})")
+        paths = chosen
     return [load_config(p, hyperparams) for p in paths]
+
+
+def _same_config(run_dir: Path, cfg: AgentConfig) -> bool:
+    recorded = read_manifest(run_dir).get("config")
+    return json.dumps(recorded, sort_keys=True) == json.dumps(cfg.to_dict(), sort_keys=True)
+
+
+def agent_run(
+    cfg: AgentConfig, log_dir: Path, train_missing: bool = True, progress: bool = True
+) -> Path:
+    """The run of ``cfg`` that :func:`compare` reports: the latest finished run of it in
+    ``log_dir``; else its latest interrupted run with the same config, resumed; else a new
+    run, trained (``train_missing``; else ``FileNotFoundError``)."""
+    base = run_dir_for(cfg, log_dir).name
+    finished = latest_run(log_dir, base, FINISHED)
+    if finished is not None:
+        return finished
+    if not train_missing:
+        raise FileNotFoundError(
+            f"no finished run of {cfg.name} in {log_dir} (run: roughwalk train "
+            f"{_display(cfg.path)} --log-dir {log_dir})"
+        )
+    interrupted = latest_run(log_dir, base, INTERRUPTED)
+    if interrupted is not None and _same_config(interrupted, cfg):
+        stops = read_manifest(interrupted).get("interruptions") or [{}]
+        checkpoint = stops[-1].get("checkpoint")
+        if checkpoint and Path(checkpoint).is_file():
+            print(f"resuming the interrupted run {interrupted} from {checkpoint}")
+            return train(cfg, log_dir=None, resume=checkpoint, progress_bar=progress, threads=None)
+    return train(cfg, log_dir=log_dir, progress_bar=progress, threads=None)
 
 
 def compare(
@@ -156,13 +208,23 @@ def compare(
         only: only the agent configs whose name contains this.
         baselines: the baseline rows.
         settings: the terrain settings.
-        train_missing: train the agents without a final model (else raise
+        train_missing: train the agents without a finished run (else raise
             ``FileNotFoundError``).
         hyperparams: hyperparameters overriding those of every config.
         dry_run: list the rows and their commands only; train, evaluate and write nothing.
         progress: show progress bars.
+
+    Raises:
+        ConfigError, ValueError: bad arguments or configs, an output or log folder that cannot
+            be written; before anything is trained, evaluated or written.
     """
+    for name, value, low in (("--episodes", episodes, 1), ("--seed", seed, 0)):
+        if isinstance(value, bool) or not isinstance(value, int) or value < low:
+            raise ValueError(f"{name}: must be an integer >= {low}, got {value!r}")
     configs = load_agent_configs(Path(config_dir), only, hyperparams)
+    if not dry_run:
+        check_writable(out, "--out")
+        check_writable(log_dir, "--log-dir")
     rows: list[dict[str, Any]] = []
     evaluations: list[Evaluation] = []
     for s in settings:
@@ -176,13 +238,12 @@ def compare(
             rows.append(row)
         agents = sorted((c for c in configs if s.matches(c)), key=lambda c: (c.is_residual, c.algo))
         for cfg in agents:  # from scratch first, then residual
-            run_dir = run_dir_for(cfg, log_dir)
-            final = run_dir / "model.zip"
             train_cmd = f"roughwalk train {_display(cfg.path)} --log-dir {log_dir}"
-            if not dry_run and not final.is_file():
-                if not train_missing:
-                    raise FileNotFoundError(f"{final} missing (run: {train_cmd})")
-                train(cfg, log_dir=log_dir, progress_bar=progress, threads=None)
+            if dry_run:
+                base = run_dir_for(cfg, log_dir)
+                run_dir = latest_run(log_dir, base.name, FINISHED) or base
+            else:
+                run_dir = agent_run(cfg, Path(log_dir), train_missing, progress)
             model = chosen_model(run_dir)
             cmd = f"{train_cmd} && " + evaluate_command(str(model), s, episodes, seed)
             row = {"setting": s.name, "policy": agent_label(cfg), "command": cmd}
@@ -195,12 +256,13 @@ def compare(
     if not dry_run:
         out = Path(out)
         out.mkdir(parents=True, exist_ok=True)
-        (out / "compare.json").write_text(
+        atomic_write_text(
+            out / "compare.json",
             json.dumps({"rows": rows, "evaluations": [e.to_dict() for e in evaluations]}, indent=2)
-            + "\n"
+            + "\n",
         )
-        write_csv(evaluations, out / "compare.csv")
-        (out / "compare.md").write_text(markdown_table(rows))
+        atomic_write(out / "compare.csv", lambda tmp: write_csv(evaluations, tmp))
+        atomic_write_text(out / "compare.md", markdown_table(rows))
     return Comparison(rows, evaluations)
 
 

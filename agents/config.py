@@ -19,9 +19,10 @@ One file describes one training run. It holds two top-level sections:
 
 ``<env id>`` (rl-zoo3's hyperparameter format): ``policy``, ``n_timesteps``, ``n_envs``,
 ``normalize``, ``frame_stack``, ``env_kwargs``, ``env_wrapper``, ``policy_kwargs`` and the
-algorithm's own keyword arguments, with rl-zoo3's ``lin_<value>`` linear schedules. Because the
-env id is a top-level key, the same file works with
-``python -m rl_zoo3.train --algo ppo --env <env id> --gym-packages envs --conf-file <file>``,
+algorithm's own keyword arguments, with rl-zoo3's ``lin_<value>`` linear schedules; each is
+checked against the table of known hyperparameters and their ranges in ``agents.hyperparams``
+before stable-baselines3 sees it. Because the env id is a top-level key, the same file works
+with ``python -m rl_zoo3.train --algo ppo --env <env id> --gym-packages envs --conf-file <file>``,
 which ignores the ``run`` section.
 """
 
@@ -29,7 +30,6 @@ from __future__ import annotations
 
 import copy
 import importlib
-import inspect
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -40,6 +40,7 @@ import numpy as np
 import yaml
 
 import envs  # noqa: F401  (registers the roughwalk ids)
+from agents.hyperparams import check_hyperparams
 from agents.residual import ResidualWrapper
 
 # Training seeds lie below TRAIN_SEED_LIMIT, evaluation seeds at or above EVAL_SEED_OFFSET, so
@@ -68,8 +69,6 @@ ZOO_KEYS = frozenset(
         "noise_std",
     }
 )
-# rl-zoo3 keys that roughwalk train does not apply: rejected rather than silently ignored
-UNSUPPORTED_ZOO_KEYS = ("vec_env_wrapper", "callback", "monitor_kwargs")
 SCHEDULE_KEYS = ("learning_rate", "clip_range", "clip_range_vf", "delta_std")
 RUN_KEYS = {
     "algo": str,
@@ -195,6 +194,32 @@ class AgentConfig:
     def n_envs(self) -> int:
         """Number of training envs (1 unless the config says otherwise)."""
         return int(self.hyperparams.get("n_envs", 1))
+
+    @property
+    def rollout_steps(self) -> int:
+        """Env steps the algorithm collects between two updates, all envs together: training
+        stops at the first whole multiple of it at or beyond the budget (PPO and A2C:
+        ``n_steps * n_envs``; SAC and TD3: ``train_freq * n_envs`` when ``train_freq`` counts
+        steps, else ``n_envs``)."""
+        import inspect
+
+        defaults = inspect.signature(self.algo_class.__init__).parameters
+        if self.algo in ("ppo", "a2c"):
+            return int(self.hyperparams.get("n_steps", defaults["n_steps"].default)) * self.n_envs
+        freq = self.hyperparams.get("train_freq", defaults["train_freq"].default)
+        if isinstance(freq, list | tuple):
+            freq = freq[0] if freq[1] == "step" else 1
+        return int(freq) * self.n_envs
+
+    def planned_timesteps(self, start: int = 0) -> int:
+        """The env steps a training from ``start`` to the budget ends at (the budget rounded
+        up to whole updates, see :attr:`rollout_steps`).
+
+        Args:
+            start: env steps already trained (a resumed run).
+        """
+        chunk = self.rollout_steps
+        return start + -(-max(self.n_timesteps - start, 0) // chunk) * chunk
 
     @property
     def env_kwargs(self) -> dict[str, Any]:
@@ -389,7 +414,7 @@ def config_from_dict(
             raise ConfigError(f"{path}: run.{key} must be {typ.__name__}, got {value!r}")
     algo = run["algo"].lower()
     try:
-        algo_cls = algorithm_class(algo)
+        algorithm_class(algo)
     except ConfigError as exc:
         raise ConfigError(f"{path}: run.algo: {exc}") from None
     env_id = run["env"]
@@ -404,7 +429,7 @@ def config_from_dict(
             "env id given in run.env)"
         )
     hyper = {**copy.deepcopy(hyper), **copy.deepcopy(dict(overrides or {}))}
-    _check_hyperparams(path, algo_cls, hyper)
+    hyper = _check_hyperparams(path, algo, hyper, set(overrides or {}))
     n_envs = int(hyper.get("n_envs", 1))
     _check_range(path, "run.seed", run["seed"], 0, TRAIN_SEED_LIMIT - n_envs)
     _check_range(path, "run.eval_episodes", run["eval_episodes"], 1, VALIDATION_SEEDS)
@@ -445,62 +470,11 @@ def _check_range(path: Path, name: str, value: int, lo: int, hi: int | None) -> 
         raise ConfigError(f"{path}: {name} = {value} is out of range; allowed: {allowed}")
 
 
-# constructor arguments roughwalk train sets itself (the config must not)
-_SET_BY_TRAINER = {
-    "self",
-    "env",
-    "seed",
-    "device",
-    "tensorboard_log",
-    "verbose",
-    "_init_setup_model",
-}
-
-
-def _check_hyperparams(path: Path, algo_cls: type, hyper: dict[str, Any]) -> None:
-    params = inspect.signature(algo_cls.__init__).parameters
-    unsupported = sorted(set(hyper) & set(UNSUPPORTED_ZOO_KEYS))
-    if unsupported:
-        raise ConfigError(
-            f"{path}: {', '.join(unsupported)} is not supported by roughwalk train; "
-            "use env_wrapper, frame_stack or normalize"
-        )
-    allowed = (set(params) - _SET_BY_TRAINER) | (ZOO_KEYS - set(UNSUPPORTED_ZOO_KEYS))
-    unknown = sorted(set(hyper) - allowed)
-    if unknown:
-        raise ConfigError(
-            f"{path}: unknown hyperparameter(s) {', '.join(unknown)} for "
-            f"{algo_cls.__name__}; allowed: {', '.join(sorted(allowed))}"
-        )
-    if "n_timesteps" not in hyper:
-        raise ConfigError(f"{path}: n_timesteps is required in the hyperparameter section")
-    for key in ("n_timesteps", "n_envs"):
-        if key in hyper:
-            value = hyper[key]
-            if isinstance(value, bool) or not isinstance(value, int | float) or value < 1:
-                raise ConfigError(f"{path}: {key} must be a positive number, got {value!r}")
-            if float(value) != int(value):
-                raise ConfigError(f"{path}: {key} must be a whole number, got {value!r}")
-    fs = hyper.get("frame_stack")
-    if (
-        fs is not None
-        and fs is not False
-        and (isinstance(fs, bool) or not isinstance(fs, int) or fs < 1)
-    ):
-        raise ConfigError(f"{path}: frame_stack must be a whole number >= 1, got {fs!r}")
-    for key in SCHEDULE_KEYS:
-        value = hyper.get(key)
-        if isinstance(value, str):
-            kind, _, number = value.partition("_")
-            try:
-                float(number)
-            except ValueError:
-                kind = ""
-            if kind != "lin":
-                raise ConfigError(f"{path}: {key} = {value!r}; use a number or 'lin_<number>'")
-    norm = hyper.get("normalize", False)
-    if not isinstance(norm, bool | dict) and norm is not None:
-        raise ConfigError(f"{path}: normalize must be true/false or a dict of VecNormalize kwargs")
-    kwargs = hyper.get("env_kwargs")
-    if kwargs is not None and not isinstance(kwargs, dict):
-        raise ConfigError(f"{path}: env_kwargs must be a mapping, got {kwargs!r}")
+def _check_hyperparams(
+    path: Path, algo: str, hyper: dict[str, Any], overridden: set[str]
+) -> dict[str, Any]:
+    """``hyper`` checked against the table of ``agents.hyperparams`` (values normalised)."""
+    try:
+        return check_hyperparams(algo, hyper, str(path), overridden)
+    except ValueError as exc:
+        raise ConfigError(str(exc)) from None

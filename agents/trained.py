@@ -1,12 +1,17 @@
 """Trained stable-baselines3 models as policies, and policies by name (baseline or model file).
 
 A model saved by ``roughwalk train`` (``model.zip``, ``best_model.zip`` or a checkpoint) or by
-rl-zoo3 is loaded with its ``VecNormalize`` statistics and its run's env wrappers.
+rl-zoo3 is loaded with its ``VecNormalize`` statistics and its run's env wrappers. Models saved
+by ``roughwalk train`` carry their algorithm and config in the zip, so they load also when
+copied out of their run folder (with their statistics file beside them, or named).
+
+Loading a model zip or a ``vecnormalize.pkl`` unpickles it, which can run arbitrary code: load
+only files you trust. The algorithm and config are read from the zip's JSON part first,
+without unpickling anything.
 """
 
 from __future__ import annotations
 
-import json
 from pathlib import Path
 from typing import Any
 
@@ -16,24 +21,17 @@ import numpy as np
 from agents.config import algorithm_class, config_from_dict
 from agents.policies import BASELINES, Policy, make_baseline_policy
 from agents.runs import (
+    MODEL_INFO,
     find_manifest,
     find_vecnormalize,
     load_vecnormalize,
+    model_algo,
+    model_data,
+    read_manifest,
+    vecnormalize_path,
     zoo_config,
     zoo_run_files,
 )
-
-
-def _algo_from_zip(path: Path) -> str:
-    """The algorithm name (``ppo``, ``sac``, ...) of a model file, from its policy class."""
-    from stable_baselines3.common.save_util import load_from_zip_file
-
-    data, _, _ = load_from_zip_file(path, device="cpu", load_data=True)
-    module = getattr((data or {}).get("policy_class"), "__module__", "")
-    for name in ("ppo", "sac", "td3", "a2c"):
-        if f".{name}." in module:
-            return name
-    raise ValueError(f"{path}: cannot tell the algorithm of this model (policy class {module!r})")
 
 
 class TrainedPolicy:
@@ -43,13 +41,20 @@ class TrainedPolicy:
         model_path: ``.zip`` saved by SB3.
         vecnormalize: ``VecNormalize`` statistics file; by default the one saved beside the model
             (see ``find_vecnormalize``), none if there is none.
-        algo: algorithm name; by default from the run manifest or the file.
+        algo: algorithm name (``ppo``, ``sac``, ``td3``, ``a2c``); by default the one recorded
+            in the model, its run or its policy class.
+
+    Raises:
+        FileNotFoundError: no model file.
+        ValueError: not a readable model, an unknown or contradicting ``algo``, or a model
+            trained on normalised observations whose statistics are missing.
 
     Attributes:
         manifest: the run manifest (``roughwalk train``), or ``{}``.
-        config: the run's ``AgentConfig`` (from the manifest, or from rl-zoo3's saved
-            settings for a model trained with rl-zoo3), else None; its ``wrap(env)`` applies
-            the env wrappers the agent was trained with (e.g. the residual).
+        config: the run's ``AgentConfig`` (from the manifest, from the config recorded in the
+            model, or from rl-zoo3's saved settings for a model trained with rl-zoo3), else
+            None; its ``wrap(env)`` applies the env wrappers the agent was trained with (e.g.
+            the residual).
         frame_stack: observations stacked per action (the config's ``frame_stack``), or None;
             the stack restarts at :meth:`reset`, as SB3's ``VecFrameStack`` does.
     """
@@ -63,19 +68,40 @@ class TrainedPolicy:
         self.path = Path(model_path)
         if not self.path.is_file():
             raise FileNotFoundError(f"model file not found: {self.path}")
+        data = model_data(self.path)  # JSON only: nothing unpickled yet
+        recorded = model_algo(data)
+        if algo is not None:
+            algorithm_class(algo)  # a clear error for an unknown name
+            algo = algo.lower()
+            if recorded is not None and recorded != algo:
+                raise ValueError(f"--algo {algo}: {self.path} is a {recorded.upper()} model")
         manifest_path = find_manifest(self.path)
-        self.manifest: dict[str, Any] = (
-            json.loads(manifest_path.read_text()) if manifest_path else {}
-        )
+        self.manifest: dict[str, Any] = read_manifest(manifest_path.parent) if manifest_path else {}
         self.config = None
         if "config" in self.manifest:
             self.config = config_from_dict(self.manifest["config"], manifest_path)
+        info = data.get(MODEL_INFO) or {}
+        if self.config is None and isinstance(info.get("config"), dict):
+            self.config = config_from_dict(info["config"], self.path)
         zoo = zoo_run_files(self.path) if self.config is None else None
         if zoo is not None:
             self.config = config_from_dict(zoo_config(zoo, algo), zoo / "config.yml")
-        algo = algo or (self.config.algo if self.config else None) or _algo_from_zip(self.path)
-        self.model = algorithm_class(algo).load(self.path, device="cpu")
+        algo = algo or recorded or (self.config.algo if self.config else None)
+        if algo is None:
+            raise ValueError(
+                f"{self.path}: cannot tell the algorithm of this model; name it (--algo)"
+            )
         vn_path = Path(vecnormalize) if vecnormalize else find_vecnormalize(self.path)
+        if vn_path is None and self.config is not None and self.config.normalize_kwargs:
+            raise ValueError(
+                f"{self.path}: trained on normalised observations, but no VecNormalize "
+                f"statistics beside it (expected {vecnormalize_path(self.path).name}); "
+                "copy them with the model or name them (--vecnormalize)"
+            )
+        try:
+            self.model = algorithm_class(algo).load(self.path, device="cpu")
+        except Exception as exc:  # noqa: BLE001  (a corrupted zip can raise anything)
+            raise ValueError(f"{self.path}: cannot load the {algo.upper()} model ({exc})") from None
         self.vecnormalize_path = vn_path
         self.obs_norm = load_vecnormalize(vn_path) if vn_path else None
         self.frame_stack = self.config.frame_stack if self.config else None
@@ -109,15 +135,28 @@ class TrainedPolicy:
         return action
 
 
-def load_policy(spec: str, env: gym.Env | None = None, **kwargs: Any) -> Policy:
+def load_policy(
+    spec: str,
+    env: gym.Env | None = None,
+    algo: str | None = None,
+    vecnormalize: str | Path | None = None,
+) -> Policy:
     """The policy ``spec``: a baseline by name (for ``env``, which it needs) or a trained model
-    by path (``kwargs`` go to :class:`TrainedPolicy`)."""
+    by path (a :class:`TrainedPolicy`; unpickles the model and its statistics).
+
+    Args:
+        spec: a baseline's name (``BASELINES``) or the path of a model ``.zip``.
+        env: the env (baselines only).
+        algo: a trained model's algorithm (``ppo``, ``sac``, ``td3``, ``a2c``); by default the
+            one recorded in the model, its run or its policy class.
+        vecnormalize: a trained model's ``VecNormalize`` statistics (default: beside it).
+    """
     if spec in BASELINES:
         if env is None:
             raise ValueError(f"baseline policy {spec!r} needs the env")
         return make_baseline_policy(spec, env)
     if Path(spec).suffix == ".zip" or Path(spec).is_file():
-        return TrainedPolicy(spec, **kwargs)
+        return TrainedPolicy(spec, vecnormalize=vecnormalize, algo=algo)
     raise ValueError(
         f"policy {spec!r} is neither a baseline ({', '.join(BASELINES)}) nor a model file"
     )

@@ -2,12 +2,14 @@
 
 For each terrain setting (flat, the paper's stairs, rough blocks at two difficulty levels) it
 evaluates the baselines (passive, PD, reference controller) and, for every config in
-``configs/agents`` whose env matches the setting, trains the agent (unless its run already has a
-final model) and evaluates it (the best model of the periodic evaluations on the validation
-courses, else the final one; see :func:`chosen_model`), all on the same held-out test seeds.
-It writes ``compare.json`` (every episode), ``compare.csv`` and ``compare.md`` (the summary
-table with the command reproducing each row and the training budget) to ``--out`` and prints
-the table.
+``configs/agents`` whose env matches the setting, trains the agent and evaluates it (the best
+model of the periodic evaluations on the validation courses, else the final one), all on the
+same held-out test seeds. A finished run of the config in ``--log-dir`` is reused (the latest
+one); an interrupted run of the same config is resumed; otherwise a new run is trained. It
+writes ``compare.json`` (every episode), ``compare.csv`` and ``compare.md`` (the summary table
+with the command reproducing each row and the env steps each agent was really trained for) to
+``--out`` and prints the table. Reusing or resuming a run unpickles its files: use log folders
+you trust.
 """
 
 from __future__ import annotations
@@ -16,7 +18,7 @@ import argparse
 from pathlib import Path
 
 from agents.compare import CONFIG_DIR, SETTINGS, compare, markdown_table
-from agents.config import TEST_SEED, ConfigError
+from agents.config import TEST_SEED
 from agents.train import set_threads
 from commands.evaluate import print_table
 
@@ -31,14 +33,21 @@ def configure(parser: argparse.ArgumentParser) -> None:
         choices=[x.name for x in SETTINGS],
         help="only these terrain settings (default: all)",
     )
-    parser.add_argument("--log-dir", type=Path, default=Path("runs"), help="runs folder")
+    parser.add_argument(
+        "--log-dir",
+        type=Path,
+        default=Path("runs"),
+        help="runs folder: the latest finished run of each config is reused (default: runs)",
+    )
     parser.add_argument("--out", type=Path, default=Path("results"), help="output folder")
     parser.add_argument("--episodes", type=int, default=50, help="episodes per row")
     parser.add_argument(
         "--seed", type=int, default=TEST_SEED, help="held-out seed offset (as evaluate)"
     )
     parser.add_argument(
-        "--no-train", action="store_true", help="fail instead of training missing agents"
+        "--no-train",
+        action="store_true",
+        help="fail instead of training agents with no finished run in --log-dir",
     )
     parser.add_argument(
         "--dry-run", action="store_true", help="print the table of commands, run nothing"
@@ -48,8 +57,12 @@ def configure(parser: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    """``roughwalk compare`` with the parsed ``args``; returns the exit status (2: bad
-    config)."""
+    """``roughwalk compare`` with the parsed ``args``; returns the exit status (130: stopped by
+    Ctrl-C; a training in progress was saved).
+
+    Raises:
+        ValueError, OSError: bad arguments or configs, before anything is run or written.
+    """
     set_threads(args.threads)
     try:
         result = compare(
@@ -64,9 +77,8 @@ def run(args: argparse.Namespace) -> int:
             dry_run=args.dry_run,
             progress=not args.no_progress,
         )
-    except (ConfigError, FileNotFoundError, ValueError) as exc:
-        print(f"roughwalk compare: error: {exc}")
-        return 2
+    except KeyboardInterrupt:
+        return 130
     if args.dry_run:
         print(markdown_table(result.rows), end="")
     else:

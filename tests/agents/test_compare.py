@@ -5,7 +5,11 @@ from __future__ import annotations
 import json
 from pathlib import Path
 
-from agents.compare import SETTINGS, chosen_model, compare
+import pytest
+
+from agents.compare import CONFIG_DIR, SETTINGS, chosen_model, compare
+from agents.config import load_config
+from agents.train import train
 
 
 def test_compare_trains_evaluates_and_writes_the_table(tmp_path: Path):
@@ -39,3 +43,63 @@ def test_compare_reports_the_validation_best_model_when_there_is_one(tmp_path: P
     assert chosen_model(tmp_path) == tmp_path / "model.zip"
     (tmp_path / "best_model.zip").write_text("best on the validation courses")
     assert chosen_model(tmp_path) == tmp_path / "best_model.zip"
+
+
+TINY = {"n_timesteps": 256, "n_envs": 2, "n_steps": 64, "batch_size": 64, "n_epochs": 1}
+
+
+def _compare_flat_ppo(tmp_path: Path, hyperparams: dict, **kwargs):
+    return compare(
+        log_dir=tmp_path / "runs",
+        out=tmp_path / "results",
+        episodes=1,
+        only="ppo_flat",
+        baselines=(),
+        settings=SETTINGS[:1],
+        hyperparams=hyperparams,
+        progress=False,
+        **kwargs,
+    )
+
+
+def test_compare_reuses_the_latest_finished_run_and_reports_the_steps_it_trained(
+    tmp_path: Path,
+):
+    cfg = load_config(CONFIG_DIR / "ppo_flat.yaml", TINY, {"eval_freq": 0})
+    train(cfg, log_dir=tmp_path / "runs", progress_bar=False, tensorboard=False)
+    longer = load_config(cfg.path, {**TINY, "n_timesteps": 300}, {"eval_freq": 0})
+    second = train(longer, log_dir=tmp_path / "runs", progress_bar=False, tensorboard=False)
+    assert second.name == "ppo_flat_s0_2"
+    (row,) = _compare_flat_ppo(tmp_path, TINY, train_missing=False).rows
+    assert str(second / "model.zip") in row["command"]
+    # rollouts of 2 x 64 steps: 300 asked, 384 trained, and that is what the table says
+    assert row["budget"].startswith("384 steps")
+    assert sorted(p.name for p in (tmp_path / "runs").iterdir()) == ["ppo_flat_s0", "ppo_flat_s0_2"]
+
+
+def test_compare_resumes_an_interrupted_run_of_the_same_config(tmp_path: Path, monkeypatch):
+    import importlib
+
+    from stable_baselines3.common.callbacks import BaseCallback
+
+    train_module = importlib.import_module("agents.train")
+    make = train_module.make_callbacks
+
+    class CtrlC(BaseCallback):
+        def _on_step(self) -> bool:
+            if self.num_timesteps >= 128:
+                raise KeyboardInterrupt
+            return True
+
+    monkeypatch.setattr(train_module, "make_callbacks", lambda *a, **k: make(*a, **k) + [CtrlC()])
+    with pytest.raises(KeyboardInterrupt):
+        _compare_flat_ppo(tmp_path, TINY)
+    monkeypatch.undo()
+    run = tmp_path / "runs" / "ppo_flat_s0"
+    assert json.loads((run / "manifest.json").read_text())["status"] == "interrupted"
+    (row,) = _compare_flat_ppo(tmp_path, TINY).rows
+    manifest = json.loads((run / "manifest.json").read_text())
+    assert manifest["status"] == "finished" and manifest["num_timesteps"] == 256
+    assert manifest["resumed_from"] == [str(run / "checkpoints" / "rl_model_128_steps.zip")]
+    assert str(run / "model.zip") in row["command"]
+    assert [p.name for p in (tmp_path / "runs").iterdir()] == ["ppo_flat_s0"]

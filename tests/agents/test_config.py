@@ -98,7 +98,11 @@ def test_unknown_env_id():
     ("section", "change", "message"),
     [
         ("roughwalk/CompassGaitFlat-v0", {"n_stepz": 64}, r"unknown hyperparameter\(s\) n_stepz"),
-        ("roughwalk/CompassGaitFlat-v0", {"n_timesteps": -5}, "n_timesteps must be a positive"),
+        (
+            "roughwalk/CompassGaitFlat-v0",
+            {"n_timesteps": -5},
+            "n_timesteps must be a whole number >= 1, got -5",
+        ),
         ("roughwalk/CompassGaitFlat-v0", {"learning_rate": "cos_1e-3"}, "lin_<number>"),
         ("roughwalk/CompassGaitFlat-v0", {"env_wrapper": "agents.nowhere.Wrap"}, "cannot import"),
         ("roughwalk/CompassGaitFlat-v0", {"normalize": "yes"}, "normalize must be"),
@@ -131,3 +135,52 @@ def test_seed_ranges_are_disjoint():
     assert TRAIN_SEED_LIMIT <= EVAL_SEED_OFFSET
     cfg = load_config(CONFIG_DIR / "sac_flat.yaml", run_overrides={"seed": 5})
     assert cfg.seed + cfg.n_envs <= TRAIN_SEED_LIMIT
+
+
+def test_the_hyperparameter_table_matches_the_algorithms():
+    """Every known hyperparameter is a keyword of its algorithm or an rl-zoo3 key, and every
+    keyword of the algorithms is either known, unsupported, or set by the trainer."""
+    import inspect
+
+    from agents.config import ZOO_KEYS, algorithms
+    from agents.hyperparams import HYPERPARAMETERS, UNSUPPORTED
+
+    set_by_trainer = {"self", "env", "seed", "device", "tensorboard_log", "verbose"}
+    for algo, cls in algorithms().items():
+        keywords = set(inspect.signature(cls.__init__).parameters) - {"_init_setup_model"}
+        known = {name for name, a in HYPERPARAMETERS if a == algo}
+        assert known <= keywords | ZOO_KEYS, algo
+        assert keywords - set_by_trainer <= known | set(UNSUPPORTED), algo
+
+
+def test_values_are_normalised_and_checked_against_their_ranges():
+    cfg = config_from_dict(
+        _with("roughwalk/CompassGaitFlat-v0", learning_rate="1e-3", n_timesteps=2.0e3, gamma=1)
+    )
+    # YAML reads 1e-3 as text; a whole float budget is a whole number
+    assert cfg.hyperparams["learning_rate"] == 1e-3 and cfg.hyperparams["n_timesteps"] == 2000
+    assert isinstance(cfg.hyperparams["n_timesteps"], int)
+    for change, message in [
+        ({"gamma": 2.0}, r"gamma must be a number in \[0, 1\], got 2.0"),
+        ({"n_steps": "abc"}, "n_steps must be a whole number >= 1, got 'abc'"),
+        ({"n_steps": 64.5}, "n_steps must be a whole number >= 1, got 64.5"),
+        ({"n_steps": True}, "n_steps must be a whole number >= 1, got True"),
+        ({"policy": "CnnPolicy"}, "policy must be one of 'MlpPolicy', got 'CnnPolicy'"),
+        ({"clip_range": "lin_-1"}, "clip_range must be a number > 0 or 'lin_<number>'"),
+        ({"learning_rate": float("nan")}, "learning_rate must be a number > 0"),
+        ({"normalize": {"clip_obs": 0}}, r"normalize must be .*\(clip_obs: a number > 0\)"),
+        ({"n_steps": 1, "n_envs": 1}, "n_steps times n_envs must be at least 2"),
+        ({"buffer_size": 100}, r"unknown hyperparameter\(s\) buffer_size for PPO"),
+    ]:
+        with pytest.raises(ConfigError, match=message):
+            config_from_dict(_with("roughwalk/CompassGaitFlat-v0", **change))
+    with pytest.raises(ConfigError, match=r"gamma \(from --hyperparams\) must be"):
+        load_config(CONFIG_DIR / "sac_flat.yaml", {"gamma": -0.1})
+
+
+def test_planned_timesteps_round_the_budget_up_to_whole_updates():
+    cfg = load_config(CONFIG_DIR / "ppo_flat.yaml", {"n_timesteps": 4000})
+    assert cfg.rollout_steps == 1024 * 8 and cfg.planned_timesteps() == 8192
+    assert cfg.planned_timesteps(start=8192) == 8192  # nothing left to do
+    sac = load_config(CONFIG_DIR / "sac_flat.yaml", {"n_timesteps": 600, "train_freq": 16})
+    assert sac.planned_timesteps() == 16 * sac.n_envs * -(-600 // (16 * sac.n_envs))

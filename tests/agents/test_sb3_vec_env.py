@@ -62,9 +62,11 @@ def test_rejects_next_step_autoreset() -> None:
 
 def test_ppo_trains_under_vecnormalize() -> None:
     from stable_baselines3 import PPO
+    from stable_baselines3.common.logger import Logger
 
     venv = VecNormalize(VecMonitor(make_sb3_vec_env(ID, n_envs=4, seed=0, max_episode_steps=50)))
     model = PPO("MlpPolicy", venv, n_steps=32, batch_size=64, n_epochs=1, seed=0, device="cpu")
+    model.set_logger(Logger(None, []))  # SB3's default makes a folder in the temp folder
     model.learn(total_timesteps=256)
     assert model.num_timesteps >= 256
     assert np.all(np.isfinite(venv.obs_rms.mean))

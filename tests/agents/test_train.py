@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import os
 import subprocess
 import sys
 from pathlib import Path
@@ -90,26 +91,26 @@ def test_frame_stack_is_applied_in_training_and_in_evaluation(smoke, tmp_path: P
             stacked, _ = stacker.update(norm, np.array([False]), [{}])
 
 
-def test_resume_from_checkpoint_continues_the_run(smoke, tmp_path: Path):
+def test_resuming_a_finished_run_continues_into_a_new_run_folder(smoke, tmp_path: Path):
     cfg = smoke(CONFIG_DIR / "ppo_stairs.yaml", timesteps=2048)
     run = train(cfg, log_dir=tmp_path, progress_bar=False)
     ckpt = run / "checkpoints" / "rl_model_1024_steps.zip"
     stats_at_ckpt = load_vecnormalize(find_vecnormalize(ckpt)).obs_rms.count
-    final_before = (run / "model.zip").stat().st_mtime_ns
+    before = {p: p.read_bytes() for p in run.rglob("*") if p.is_file()}
     resumed = train(cfg, log_dir=None, resume=ckpt, progress_bar=False)
-    assert resumed == run
-    manifest = json.loads((run / "manifest.json").read_text())
+    # the finished run is kept as it was; the continuation is a new run beside it
+    assert resumed == tmp_path / f"{run.name}_2"
+    assert {p: p.read_bytes() for p in run.rglob("*") if p.is_file()} == before
+    manifest = json.loads((resumed / "manifest.json").read_text())
     assert manifest["resumed_from"] == [str(ckpt)]
+    assert manifest["status"] == "finished"
     assert manifest["num_timesteps"] == cfg.n_timesteps
-    assert (run / "model.zip").stat().st_mtime_ns > final_before
     # the normalisation statistics continued from the checkpoint's (not from scratch)
-    stats_end = load_vecnormalize(run / "vecnormalize.pkl").obs_rms.count
+    stats_end = load_vecnormalize(resumed / "vecnormalize.pkl").obs_rms.count
     assert stats_end == pytest.approx(stats_at_ckpt + 1024, abs=2)
-    # the evaluation history and the training-episode logs before the checkpoint are kept
-    evals = np.load(run / "eval" / "evaluations.npz")
-    assert list(evals["timesteps"]) == [1024, cfg.n_timesteps]
-    assert any((run / "monitor").glob("*.monitor.csv"))
-    assert any((run / "monitor" / "resume1").glob("*.monitor.csv"))
+    evals = np.load(resumed / "eval" / "evaluations.npz")
+    assert list(evals["timesteps"]) == [cfg.n_timesteps]
+    assert any((resumed / "monitor").glob("*.monitor.csv"))
 
 
 def test_periodic_evaluation_uses_the_same_held_out_courses(smoke, tmp_path: Path):
@@ -132,7 +133,10 @@ def test_rl_zoo3_reads_our_configs(tmp_path: Path):
     cmd += ["--conf-file", str(CONFIG_DIR / "ppo_rough.yaml"), "-n", "256", "--seed", "1"]
     cmd += ["-params", "n_envs:2", "n_steps:64", "batch_size:64", "n_epochs:1"]
     cmd += ["--eval-freq", "-1", "--log-folder", str(tmp_path)]
-    out = subprocess.run(cmd, capture_output=True, text=True, timeout=300)
+    # SB3's logger folder of a run without TensorBoard: by default a new one in the system's
+    # temp folder
+    env = {**os.environ, "SB3_LOGDIR": str(tmp_path / "sb3_log")}
+    out = subprocess.run(cmd, capture_output=True, text=True, timeout=300, env=env)
     assert out.returncode == 0, out.stderr[-2000:]
     assert "'difficulty': 1.0" in out.stdout  # env_kwargs of the file were used
     saved = list(tmp_path.rglob("roughwalk-CompassGaitRough-v0.zip"))
