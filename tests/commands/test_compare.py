@@ -9,8 +9,6 @@ import pytest
 
 from commands.cli import build_parser, main
 
-DISPATCHER = pytest.mark.xfail(reason="dispatcher error contract", strict=False)
-
 
 def test_compare_dry_run_lists_every_row(capsys):
     assert main(["compare", "--dry-run"]) == 0
@@ -67,7 +65,6 @@ def test_bad_input_is_an_error_naming_it(args: list[str], message: str, tmp_path
     assert sorted(p.name for p in tmp_path.iterdir()) == ["a_file", "empty"]
 
 
-@DISPATCHER
 @pytest.mark.parametrize(("args", "message"), COMPARE_ERRORS)
 def test_bad_input_exits_2_with_one_line_and_no_traceback(
     args: list[str], message: str, tmp_path: Path, capsys

@@ -21,7 +21,6 @@ GOOD = {
     "run": {"algo": "ppo", "env": "roughwalk/CompassGaitFlat-v0"},
     "roughwalk/CompassGaitFlat-v0": {"n_timesteps": 1000, "n_steps": 64},
 }
-DISPATCHER = pytest.mark.xfail(reason="dispatcher error contract", strict=False)
 
 
 def _files(tmp_path: Path) -> list[str]:
@@ -115,7 +114,6 @@ def test_bad_input_is_an_error_naming_it_before_anything_is_written(
     assert sorted(p.name for p in tmp_path.iterdir()) == before
 
 
-@DISPATCHER
 @pytest.mark.parametrize(("args", "message"), TRAIN_ERRORS, ids=IDS)
 def test_bad_input_exits_2_with_one_line_and_no_traceback(
     args: list[str], message: str, tmp_path: Path, capsys
