@@ -189,12 +189,9 @@ def evaluate_steps(
     min_thd = cfg.min_thetadot
     thd_ref = max(min_thd, 1e-3)
     lo = 0.25 * min_thd * min_thd
-    ns = step.slope_stance
-    cn = 1.0 / math.sqrt(1.0 + ns * ns)
-    sn = ns * cn
+    nx, ny = model.ground_normal(step.slope_stance)  # under the stance foot
     sl = step.slope_foot
-    ic = 1.0 / math.sqrt(1.0 + sl * sl)
-    ih = sl * ic
+    fnx, fny = model.ground_normal(sl)  # under the foothold
     weight = cfg.weight
     mass = cfg.mass
     arm = cfg.arm
@@ -272,14 +269,16 @@ def evaluate_steps(
             q1dd, q2dd = rd.nominal_accelerations(a_safe, be[k], ga[k], dph[k], ddph[k], f)
             u = rd.nominal_input(P, ph[k], th[k], dph[k], ddph[k], thd[k])
             U[b, k] = u
-            rx, ry = model.ground_reaction(P, ph[k], th[k], dph[k] * thd[k], thd[k], q1dd, q2dd)
-            fn = cn * ry - sn * rx
-            ft = cn * rx + sn * ry
+            fn, ft = model.stance_reaction(
+                P, ph[k], th[k], dph[k] * thd[k], thd[k], q1dd, q2dd, nx, ny
+            )
             G[b, col.thetadot_sq + k] = (F[b, k] - step.fmin) / (thd_ref * thd_ref)
             G[b, col.alpha + k] = al[k] / cfg.alpha_scale - 0.05
             G[b, col.torque + k] = (cfg.u_lim - abs(u)) / cfg.u_max
             G[b, col.stance_reaction + k] = fn / weight
-            G[b, col.stance_reaction + nn + k] = (cfg.friction * fn - abs(ft)) / weight
+            G[b, col.stance_reaction + nn + k] = (
+                model.friction_cone_margin(fn, ft, cfg.friction) / weight
+            )
         for k in range(nk):
             s = 0.0
             for j in range(nn):
@@ -349,16 +348,13 @@ def evaluate_steps(
         q1m, q2m, w1m, w2m = ph[e], th[e], dph[e] * thd[e], thd[e]
         q1p, q2p, w1p, w2p = model.impact(P, q1m, q2m, w1m, w2m)
         delta, slope_plus = rd.impact_along_constraint(P, q1m, dph[e])
-        vxm, vym = model.centre_of_mass_velocity(P, q1m, q2m, w1m, w2m)
-        vxp, vyp = model.centre_of_mass_velocity(P, q1p, q2p, w1p, w2p)
-        ix, iy = mass * (vxp - vxm), mass * (vyp - vym)
-        imp_n = ic * iy - ih * ix
-        imp_t = ic * ix + ih * iy
+        ix, iy = model.impact_impulse(P, q1m, q2m, w1m, w2m, q1p, q2p, w1p, w2p)
+        imp_n, imp_t = model.normal_tangential(ix, iy, fnx, fny)
         sc = mass * l * thd_ref
         G[b, col.impact] = imp_n / sc
-        G[b, col.impact + 1] = (cfg.friction * imp_n - abs(imp_t)) / sc
-        tvx, tvy = model.swing_foot_velocity(P, q1p, q2p, w1p, w2p)
-        G[b, col.trailing_foot] = (cn * tvy - sn * tvx) / (l * thd_ref)
+        G[b, col.impact + 1] = model.friction_cone_margin(imp_n, imp_t, cfg.friction) / sc
+        lift = model.trailing_foot_normal_velocity(P, q1p, q2p, w1p, w2p, nx, ny)
+        G[b, col.trailing_foot] = lift / (l * thd_ref)
         G[b, col.post_impact_speed] = (delta * thd[e] - min_thd) / thd_ref
         if periodic:
             G[b, col.periodic] = 1.0 - gain - 0.02

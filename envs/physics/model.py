@@ -374,10 +374,19 @@ def normal_tangential(fx, fy, nx, ny):
 
 
 @_jit
+def friction_cone_margin(fn, ft, mu):
+    """Margin ``mu fn - |ft|`` [N or N s] of a contact force [N] or impulse [N s] with normal
+    component ``fn`` and tangential component ``ft`` inside the friction cone of coefficient
+    ``mu`` (dimensionless): negative outside the cone."""
+    return mu * fn - abs(ft)
+
+
+@_jit
 def outside_friction_cone(fn, ft, mu):
     """Whether a contact force [N] or impulse [N s] with normal component ``fn`` and tangential
-    component ``ft`` lies outside the friction cone ``|ft| <= mu fn`` (``mu`` dimensionless)."""
-    return abs(ft) > mu * fn
+    component ``ft`` lies outside the friction cone ``|ft| <= mu fn`` (``mu`` dimensionless):
+    :func:`friction_cone_margin` negative."""
+    return friction_cone_margin(fn, ft, mu) < 0.0
 
 
 @_jit
