@@ -16,10 +16,7 @@ from rich.console import Console
 from rich.table import Table
 
 from envs import RobotParams, SimConfig, Terrain, simulate
-from envs.physics.passive import passive_limit_cycle, slope_section_state
-
-# starting guess for Newton: the classic walker's cycle on a 0.0525 rad slope (q2, q1d, q2d)
-CYCLE_GUESS = (-0.218775, 1.092867 - 0.376135, 1.092867)
+from envs.physics.passive import CLASSIC_CYCLE, passive_limit_cycle, slope_section_state
 
 
 def configure(parser: argparse.ArgumentParser) -> None:
@@ -51,7 +48,8 @@ def run(args: argparse.Namespace) -> int:
     params = RobotParams.from_preset(args.robot)
     gamma = -args.slope
     try:
-        cycle = passive_limit_cycle(params, gamma, CYCLE_GUESS)
+        # Newton starts from the classic walker's cycle on a 0.0525 rad slope
+        cycle = passive_limit_cycle(params, gamma, CLASSIC_CYCLE.section)
     except RuntimeError as exc:
         console.print(
             f"[red]no passive limit cycle found for {args.robot} on {args.slope} rad: {exc}"
