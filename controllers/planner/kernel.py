@@ -140,17 +140,6 @@ _jit = njit(cache=True, error_model="numpy")
 
 
 @_jit
-def _cumint(v, q, half, out):
-    """``out[k] = int_{theta_0}^{theta_k} v`` on the Chebyshev grid (``q``: node matrix)."""
-    n = v.size
-    for k in range(n):
-        s = 0.0
-        for j in range(n):
-            s += q[k, j] * v[j]
-        out[k] = half * s
-
-
-@_jit
 def evaluate_steps(
     P, a, thd_plus_in, periodic, use_ref, shape_ref, cfg, step, grids, ground, col, out
 ):
@@ -204,8 +193,6 @@ def evaluate_steps(
     al = np.empty(nn)
     be = np.empty(nn)
     ga = np.empty(nn)
-    w = np.empty(nn)
-    kint = np.empty(nn)
     hint = np.empty(nn)
     psi = np.empty(nn)
     thd = np.empty(nn)
@@ -233,18 +220,8 @@ def evaluate_steps(
             th[k] = th0 + span * snodes[k]
         # reduced dynamics and its integral theta_dot^2 = psi theta_dot0^2 + Gam
         for k in range(nn):
-            a_, b_, g_ = rd.reduced_coefficients(P, ph[k], th[k], dph[k], ddph[k])
-            al[k] = a_
-            be[k] = b_
-            ga[k] = g_
-            w[k] = 2.0 * b_ / max(a_, al_min)
-        _cumint(w, qint, half, kint)
-        for k in range(nn):
-            w[k] = -2.0 * ga[k] / max(al[k], al_min) * math.exp(kint[k])
-        _cumint(w, qint, half, hint)
-        for k in range(nn):
-            psi[k] = math.exp(-kint[k])
-            hint[k] = psi[k] * hint[k]  # Gam
+            al[k], be[k], ga[k] = rd.reduced_coefficients(P, ph[k], th[k], dph[k], ddph[k])
+        rd.grid_reduced_integral(al, be, ga, qint, half, al_min, psi, hint)  # hint: Gam
         gain = math.nan
         if periodic:
             d, _ = rd.impact_along_constraint(P, ph[nn - 1], dph[nn - 1])
@@ -256,11 +233,8 @@ def evaluate_steps(
             td2 = 0.0
             thp = thd_plus_in[b]
         for k in range(nn):
-            f = psi[k] * thp * thp + hint[k]
-            F[b, k] = f
-            thd[k] = math.sqrt(max(f, lo))
-            w[k] = 1.0 / thd[k]
-        _cumint(w, qint, half, tcum)
+            F[b, k] = psi[k] * thp * thp + hint[k]
+        rd.grid_step_time(F[b], qint, half, lo, thd, tcum)
         T = tcum[nn - 1]
         # nominal input and stance-foot reaction along the motion
         for k in range(nn):
