@@ -225,6 +225,18 @@ def swing_foot_position(P, q1, q2, xs, ys, retract=0.0):
 
 
 @_jit
+def touchdown_configuration(dx, dh, l):
+    """Pre-impact ``(q1, q2)`` [rad] that puts the swing foot at ``(dx, dh)`` [m] from the
+    stance foot with both legs at full length ``l`` [m] (the inverse of
+    :func:`swing_foot_position`): ``l (sin q2 - sin(q2 - q1)) = dx``,
+    ``l (cos q2 - cos(q2 - q1)) = dh``; ``q1`` is ``NaN`` where the foothold is out of reach.
+    Scalars only."""
+    chord = math.hypot(dx, dh) / (2.0 * l)
+    q1 = 2.0 * math.asin(chord) if chord <= 1.0 else math.nan
+    return q1, math.atan2(-dh, dx) + 0.5 * q1
+
+
+@_jit
 def swing_foot_velocity(P, q1, q2, q1d, q2d):
     """Swing-foot velocity ``(vx, vy)`` [m/s] at ``(q1, q2)`` [rad], ``(q1d, q2d)`` [rad/s]
     (stance foot fixed)."""
