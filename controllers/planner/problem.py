@@ -35,7 +35,7 @@ from envs.physics import model
 from envs.physics.params import RobotParams
 
 from .. import reduced as rd
-from ..bezier import bernstein_basis
+from ..bezier import BezierConstraint, bernstein_basis
 from . import kernel
 from .config import PlannerConfig
 from .footholds import TerrainMap
@@ -264,7 +264,7 @@ class StepEvaluator:
             friction=config.friction,
             duration_min=config.duration_min,
             duration_max=config.duration_max,
-            weight=(2 * params.m + params.mHg) * params.g,
+            weight=model.weight(self.P),
             mass=params.total_mass,
             w_speed=config.w_speed,
             w_torque=config.w_torque,
@@ -295,7 +295,7 @@ class StepEvaluator:
             _, sl = rd.impact_along_constraint(
                 self.P, a[..., m], m * (a[..., m] - a[..., m - 1]) / span
             )
-        a[..., 1] = fx.a0 + sl * span / m
+        a[..., 1] = BezierConstraint.second_coeff(fx.a0, sl, fx.theta_plus, fx.theta_minus, m)
         return a
 
     def evaluate(self, fx: FixedStep, free: np.ndarray, periodic: bool = False) -> dict[str, Any]:

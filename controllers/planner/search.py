@@ -256,9 +256,8 @@ class StepSearch:
         next step will gain or lose (slow down before a drop, speed up before a rise)."""
         gait = self.gait
         dh = float(self.tmap.height(foothold[0] + self.config.step_length)) - foothold[1]
-        pr = self.params
         m22 = model.mass_matrix(self.P, q1m)[2]
-        f = gait.step.thetadot_minus**2 + 2.0 * (2 * pr.m + pr.mHg) * pr.g * dh / m22
+        f = gait.step.thetadot_minus**2 + 2.0 * model.weight(self.P) * dh / m22
         return math.sqrt(max(f, (1.5 * self.config.min_thetadot) ** 2))
 
     def _theta_target(self, theta_plus: float) -> float:

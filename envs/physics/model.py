@@ -131,11 +131,16 @@ def swing_rk4(P, q1, q2, q1d, q2d, u, h, q1dd, q2dd):
 
 
 @_jit
+def weight(P):
+    """Weight of the whole robot ``g (2 m + mHg)`` [N] (gravitational masses)."""
+    return P[PG] * (2.0 * P[PM] + P[PMHG])
+
+
+@_jit
 def potential_energy(P, q1, q2, ys):
     """Potential energy [J] at ``(q1, q2)`` [rad] with the stance foot at height ``ys`` [m]
     (gravitational masses)."""
-    mg_total = P[PG] * (2.0 * P[PM] + P[PMHG])
-    return (P[P4] + P[P5]) * np.cos(q2) - P[P4] * np.cos(q2 - q1) + mg_total * ys
+    return (P[P4] + P[P5]) * np.cos(q2) - P[P4] * np.cos(q2 - q1) + weight(P) * ys
 
 
 @_jit
@@ -268,7 +273,7 @@ def ground_reaction(P, q1, q2, q1d, q2d, q1dd, q2dd):
     Newton's law on the whole robot: inertial masses times accelerations of the bodies minus
     the gravitational force (gravitational hip mass ``mHg``).
     """
-    l, lc, m, mh, mhg, g = P[PL], P[PLC], P[PM], P[PMH], P[PMHG], P[PG]  # noqa: E741
+    l, lc, m, mh = P[PL], P[PLC], P[PM], P[PMH]  # noqa: E741
     s2, c2 = np.sin(q2), np.cos(q2)
     s = q2 - q1
     sd = q2d - q1d
@@ -282,7 +287,7 @@ def ground_reaction(P, q1, q2, q1d, q2d, q1dd, q2dd):
     # stance leg com (lc along q2), hip (l along q2), swing com (hip - (l - lc) along s)
     max_ = m * lc * ax2 + mh * l * ax2 + m * (l * ax2 - (l - lc) * axs)
     may_ = m * lc * ay2 + mh * l * ay2 + m * (l * ay2 - (l - lc) * ays)
-    return max_, may_ + g * (2.0 * m + mhg)
+    return max_, may_ + weight(P)
 
 
 # ---------------------------------------------------------------------------- momenta
