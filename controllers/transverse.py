@@ -109,8 +109,7 @@ class StepModel:
     # ------------------------------------------------------------------ nominal motion
     def derivatives(self, theta: np.ndarray | float) -> tuple[np.ndarray, ...]:
         """``(phi, phi', phi'')`` at ``theta`` (the constraint in power form, fast)."""
-        c = self.constraint
-        s = (np.asarray(theta, dtype=np.float64) - c.theta_plus) / c.span
+        s = self.constraint.s(theta)
         return tuple(npoly.polyval(s, k) for k in self._pc)
 
     def _at(self, theta: float) -> tuple[float, float, float, float]:
