@@ -14,6 +14,7 @@ from dataclasses import dataclass
 from functools import lru_cache
 
 import numpy as np
+from numba import njit
 from scipy.special import comb
 
 __all__ = [
@@ -21,6 +22,7 @@ __all__ = [
     "bernstein_basis",
     "bezier",
     "bezier_derivative_coeffs",
+    "bezier_on_basis",
 ]
 
 
@@ -62,6 +64,18 @@ def bernstein_basis(order: int, s: np.ndarray | float, deriv: int = 0) -> np.nda
         w = scale * (-1.0) ** (deriv - i) * comb(deriv, i, exact=False)
         out[..., i : i + m + 1] += w * low
     return out
+
+
+@njit(cache=True, error_model="numpy")
+def bezier_on_basis(coeffs: np.ndarray, basis: np.ndarray, out: np.ndarray) -> None:
+    """A Bezier polynomial (or a derivative) at the points of a :func:`bernstein_basis` matrix,
+    compiled: ``out[k] = sum_i coeffs[i] basis[k, i]`` for the ``(K, M + 1)`` ``basis`` and the
+    ``M + 1`` coefficients ``coeffs`` [rad]."""
+    for k in range(basis.shape[0]):
+        s = 0.0
+        for i in range(coeffs.size):
+            s += coeffs[i] * basis[k, i]
+        out[k] = s
 
 
 def bezier(coeffs: np.ndarray, s: np.ndarray | float, deriv: int = 0) -> np.ndarray | float:

@@ -45,9 +45,11 @@ __all__ = [
     "nominal_input",
     "output_acceleration",
     "pfl_terms",
+    "phase_at",
     "phase_grid",
     "reduced_coefficients",
     "reduced_integral",
+    "step_fractions",
     "step_time",
 ]
 
@@ -71,6 +73,19 @@ def cheb_nodes(n: int) -> np.ndarray:
     if int(n) != n or n < 4:
         raise ValueError(f"grid size n = {n!r}; allowed: integer >= 4")
     return _cheb_matrices(int(n))[0]
+
+
+def step_fractions(n: int) -> np.ndarray:
+    """The ``n + 1`` nodes of :func:`cheb_nodes` mapped onto ``[0, 1]``, increasing: fractions
+    of a step's phase range (``s`` of :class:`controllers.bezier.BezierConstraint`)."""
+    return 0.5 * (cheb_nodes(n) + 1.0)
+
+
+@_jit
+def phase_at(theta_a: float, span: float, s: np.ndarray | float) -> np.ndarray | float:
+    """Phase ``theta_a + span s`` [rad] at the fraction ``s`` of the range ``span`` [rad] that
+    starts at ``theta_a`` [rad] (entry by entry)."""
+    return theta_a + span * s
 
 
 def phase_grid(theta_a: float, theta_b: float, n: int) -> np.ndarray:

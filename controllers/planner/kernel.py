@@ -6,8 +6,9 @@ compiled loop, what :class:`controllers.planner.problem.StepEvaluator` documents
 dynamics along the constraint, ``theta_dot^2`` and the step time, the nominal input and
 stance-foot reaction, the swing-foot geometry against the terrain (retractable-foot rule,
 vertical faces), the touchdown and impact conditions, and the cost. Every model quantity comes
-from :mod:`envs.physics.model` (its functions compile for scalars) and the reduced dynamics from
-:mod:`controllers.reduced`; only the loops live here.
+from :mod:`envs.physics.model` (its functions compile for scalars), the reduced dynamics and the
+phase grid from :mod:`controllers.reduced` and the constraint's values from
+:mod:`controllers.bezier`; only the loops live here.
 
 The constraints of a row go to the columns of ``G`` that the constraint-group table
 (:data:`controllers.planner.problem.CONSTRAINT_GROUPS`) lays out; the kernel receives each
@@ -28,6 +29,7 @@ from envs.physics.params import PL
 from envs.physics.terrain import terrain_height
 
 from .. import reduced as rd
+from ..bezier import bezier_on_basis
 
 __all__ = [
     "StepGrids",
@@ -197,6 +199,7 @@ def evaluate_steps(
     psi = np.empty(nn)
     thd = np.empty(nn)
     tcum = np.empty(nn)
+    phg = np.empty(nk)
     cfull = np.empty(nk)
     cret = np.empty(nk)
     fxf = np.empty(nk)
@@ -206,18 +209,13 @@ def evaluate_steps(
     ahead = np.empty(nk)
     for b in range(nb):
         # constraint and its phase derivatives on the nodes
+        bezier_on_basis(a[b], B0, ph)
+        bezier_on_basis(a[b], B1, dph)
+        bezier_on_basis(a[b], B2, ddph)
         for k in range(nn):
-            s0 = 0.0
-            s1 = 0.0
-            s2 = 0.0
-            for i in range(m1):
-                s0 += a[b, i] * B0[k, i]
-                s1 += a[b, i] * B1[k, i]
-                s2 += a[b, i] * B2[k, i]
-            ph[k] = s0
-            dph[k] = s1 / span
-            ddph[k] = s2 / (span * span)
-            th[k] = th0 + span * snodes[k]
+            dph[k] = dph[k] / span
+            ddph[k] = ddph[k] / (span * span)
+            th[k] = rd.phase_at(th0, span, snodes[k])
         # reduced dynamics and its integral theta_dot^2 = psi theta_dot0^2 + Gam
         for k in range(nn):
             al[k], be[k], ga[k] = rd.reduced_coefficients(P, ph[k], th[k], dph[k], ddph[k])
@@ -260,16 +258,14 @@ def evaluate_steps(
             G[b, col.thetadot_sq + nn + k] = (s - step.fmin) / (thd_ref * thd_ref)
         # swing foot on the check grid, full length and retracted
         i_arm = -1
+        bezier_on_basis(a[b], Bg, phg)
         for k in range(nk):
-            s0 = 0.0
-            for i in range(m1):
-                s0 += a[b, i] * Bg[k, i]
-            thg = th0 + span * sg[k]
-            x, y = model.swing_foot_position(P, s0, thg, xs, ys, 0.0)
+            thg = rd.phase_at(th0, span, sg[k])
+            x, y = model.swing_foot_position(P, phg[k], thg, xs, ys, 0.0)
             fxf[k] = x
             fyf[k] = y
             cfull[k] = y - terrain_height(tx, ty, nt, x)
-            x, y = model.swing_foot_position(P, s0, thg, xs, ys, ret)
+            x, y = model.swing_foot_position(P, phg[k], thg, xs, ys, ret)
             fxr[k] = x
             fyr[k] = y
             cret[k] = y - terrain_height(tx, ty, nt, x)
@@ -360,7 +356,7 @@ def evaluate_steps(
         out.delta[b] = delta
         out.slope_plus[b] = slope_plus
         out.speed[b] = v
-        out.arm_theta[b] = th0 + span * s_cross if i_arm >= 0 else math.nan
+        out.arm_theta[b] = rd.phase_at(th0, span, s_cross) if i_arm >= 0 else math.nan
         out.thetadot_plus[b] = thp
         out.gain[b] = gain
 

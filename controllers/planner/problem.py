@@ -228,7 +228,7 @@ class StepEvaluator:
         self.params, self.cfg, self.tmap = params, config, tmap
         self.P = params.vector()
         n, m = config.grid, config.order
-        s = 0.5 * (rd.cheb_nodes(n) + 1.0)
+        s = rd.step_fractions(n)
         B = [bernstein_basis(m, s, d) for d in range(3)]
         l = params.l  # noqa: E741
         self.l = l
