@@ -23,6 +23,7 @@ __all__ = [
     "bezier",
     "bezier_derivative_coeffs",
     "bezier_on_basis",
+    "chord_coefficients",
 ]
 
 
@@ -76,6 +77,16 @@ def bezier_on_basis(coeffs: np.ndarray, basis: np.ndarray, out: np.ndarray) -> N
         for i in range(coeffs.size):
             s += coeffs[i] * basis[k, i]
         out[k] = s
+
+
+@njit(cache=True, error_model="numpy")
+def chord_coefficients(
+    a0: float, a_last: float, k: np.ndarray | int, order: int
+) -> np.ndarray | float:
+    """Coefficients ``a_0 + (a_M - a_0) k / M`` [rad] of the chord, the straight line from the
+    first to the last coefficient of an order-``M`` polynomial, at the indices ``k`` (entry by
+    entry); a shape is measured relative to it."""
+    return a0 + (a_last - a0) * k / order
 
 
 def bezier(coeffs: np.ndarray, s: np.ndarray | float, deriv: int = 0) -> np.ndarray | float:

@@ -29,7 +29,7 @@ from envs.physics.params import PL
 from envs.physics.terrain import terrain_height
 
 from .. import reduced as rd
-from ..bezier import bezier_on_basis
+from ..bezier import bezier_on_basis, chord_coefficients
 
 __all__ = [
     "StepGrids",
@@ -347,7 +347,7 @@ def evaluate_steps(
             den = max(abs(chord), 1e-6)
             sh = 0.0
             for i in range(2, m):
-                rel = (a[b, i] - (a[b, 0] + chord * i / m)) / den
+                rel = (a[b, i] - chord_coefficients(a[b, 0], a[b, m], i, m)) / den
                 sh += (rel - shape_ref[i]) ** 2
             cost += ws * cfg.w_shape * sh
         out.cost[b] = cost

@@ -35,7 +35,7 @@ from envs.physics import model
 from envs.physics.params import RobotParams
 
 from .. import reduced as rd
-from ..bezier import BezierConstraint, bernstein_basis
+from ..bezier import BezierConstraint, bernstein_basis, chord_coefficients
 from . import kernel
 from .config import PlannerConfig
 from .footholds import TerrainMap
@@ -203,7 +203,7 @@ class GaitReference(NamedTuple):
 def gait_reference(gait: PeriodicGait) -> GaitReference:
     """The :class:`GaitReference` of a periodic gait."""
     a = gait.step.coeffs
-    base = a[0] + (a[-1] - a[0]) * np.arange(a.size) / (a.size - 1)
+    base = chord_coefficients(a[0], a[-1], np.arange(a.size), a.size - 1)
     rel = (a - base) / (a[-1] - a[0])
     return GaitReference(
         gait.step.thetadot_minus, gait.step.slope_plus, rel, gait.speed, gait.step.delta

@@ -25,7 +25,7 @@ import numpy as np
 from envs.physics import model
 from envs.physics.params import RobotParams
 
-from ..bezier import BezierConstraint
+from ..bezier import BezierConstraint, chord_coefficients
 from .config import PlannerConfig, PlanningError
 from .footholds import FootholdChains, TerrainMap, touchdown_configuration
 from .plan import PeriodicGait, Plan, StepPlan
@@ -377,7 +377,9 @@ class StepSearch:
             memo.solved[key] = ev["a"][2:-1].copy()
             return ev, True
         chord = fx.a_last - fx.a0
-        base = fx.a0 + chord * np.arange(2, self.config.order) / self.config.order
+        base = chord_coefficients(
+            fx.a0, fx.a_last, np.arange(2, self.config.order), self.config.order
+        )
         samples = _global_samples(self.config.order)
         scores = [
             (float(np.sum(np.minimum(g, 0.0))), -c)
@@ -411,5 +413,5 @@ def _global_samples(order: int) -> np.ndarray:
 
 def _shape_guess(rel: np.ndarray, a0: float, a_last: float, order: int) -> np.ndarray:
     k = np.arange(order + 1)
-    base = a0 + (a_last - a0) * k / order
+    base = chord_coefficients(a0, a_last, k, order)
     return (base + rel * (a_last - a0))[2:-1]
