@@ -30,14 +30,15 @@ from controllers.observer import HighGainObserver, observer_update
 from controllers.planner import GaitPlanner, PlanningError
 from controllers.reference import ReferencePolicy
 from envs import RobotParams, Simulator, Terrain
+from envs.physics.passive import CLASSIC_CYCLE
 
 Row = tuple[str, str, str]
 Section = Callable[[argparse.Namespace], list[Row]]
 
 # the classic walker's passive cycle down a 0.0525 rad slope (post-impact state)
-_SLOPE = -0.0525
-_Q0 = (-0.218775 - 0.323775, -0.218775)
-_QD0 = (1.092867 - 0.376135, 1.092867)
+_SLOPE = CLASSIC_CYCLE.slope
+_Q0 = CLASSIC_CYCLE.q
+_QD0 = CLASSIC_CYCLE.qd
 DRAKE_STEPS_PER_S = 41_000  # Drake's C++ compass gait, 10 ms steps per second (reference)
 
 

@@ -23,10 +23,8 @@ from rich.table import Table
 from commands.cli import SIMULATOR_KERNELS, announce_compilation, float_range, int_range
 from envs import RobotParams, SimConfig, Terrain, simulate
 from envs.physics import available_presets
-from envs.physics.passive import passive_limit_cycle, slope_section_state
+from envs.physics.passive import CLASSIC_CYCLE, passive_limit_cycle, slope_section_state
 
-# starting guess for Newton: the classic walker's cycle on a 0.0525 rad slope (q2, q1d, q2d)
-CYCLE_GUESS = (-0.218775, 1.092867 - 0.376135, 1.092867)
 MAX_SLOPE = 0.25  # [rad]
 MAX_PERTURB = 0.2  # [rad, rad/s]
 
@@ -63,7 +61,8 @@ def run(args: argparse.Namespace) -> int:
     params = RobotParams.from_preset(args.robot)
     gamma = -args.slope
     try:
-        cycle = passive_limit_cycle(params, gamma, CYCLE_GUESS)
+        # Newton starts from the classic walker's cycle on a 0.0525 rad slope
+        cycle = passive_limit_cycle(params, gamma, CLASSIC_CYCLE.section)
     except RuntimeError as exc:
         raise ValueError(
             f"--slope {args.slope}: no passive limit cycle found for the {args.robot} walker on "

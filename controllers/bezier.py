@@ -14,6 +14,7 @@ from dataclasses import dataclass
 from functools import lru_cache
 
 import numpy as np
+from numba import njit
 from scipy.special import comb
 
 __all__ = [
@@ -21,6 +22,8 @@ __all__ = [
     "bernstein_basis",
     "bezier",
     "bezier_derivative_coeffs",
+    "bezier_on_basis",
+    "chord_coefficients",
 ]
 
 
@@ -62,6 +65,28 @@ def bernstein_basis(order: int, s: np.ndarray | float, deriv: int = 0) -> np.nda
         w = scale * (-1.0) ** (deriv - i) * comb(deriv, i, exact=False)
         out[..., i : i + m + 1] += w * low
     return out
+
+
+@njit(cache=True, error_model="numpy")
+def bezier_on_basis(coeffs: np.ndarray, basis: np.ndarray, out: np.ndarray) -> None:
+    """A Bezier polynomial (or a derivative) at the points of a :func:`bernstein_basis` matrix,
+    compiled: ``out[k] = sum_i coeffs[i] basis[k, i]`` for the ``(K, M + 1)`` ``basis`` and the
+    ``M + 1`` coefficients ``coeffs`` [rad]."""
+    for k in range(basis.shape[0]):
+        s = 0.0
+        for i in range(coeffs.size):
+            s += coeffs[i] * basis[k, i]
+        out[k] = s
+
+
+@njit(cache=True, error_model="numpy")
+def chord_coefficients(
+    a0: float, a_last: float, k: np.ndarray | int, order: int
+) -> np.ndarray | float:
+    """Coefficients ``a_0 + (a_M - a_0) k / M`` [rad] of the chord, the straight line from the
+    first to the last coefficient of an order-``M`` polynomial, at the indices ``k`` (entry by
+    entry); a shape is measured relative to it."""
+    return a0 + (a_last - a0) * k / order
 
 
 def bezier(coeffs: np.ndarray, s: np.ndarray | float, deriv: int = 0) -> np.ndarray | float:

@@ -23,6 +23,7 @@ from typing import Any
 import gymnasium as gym
 import numpy as np
 
+from envs.physics.encoders import encoders_to_q, stance_from_contacts
 from envs.physics.terrain import Terrain
 
 from .observer import (
@@ -115,12 +116,8 @@ class SensorStateEstimator:
         if o.shape != (self.layout.size,) or not np.all(np.isfinite(o)):
             raise ValueError(f"observation must be {self.layout.size} finite numbers")
         lay = self.layout
-        ca, cb = o[lay.contact_a] > 0.5, o[lay.contact_b] > 0.5
-        leg = 0 if (ca and not cb) else 1 if (cb and not ca) else self.stance_leg
-        hip, leg_a = o[lay.hip], o[lay.leg_a]
-        if leg == 1:
-            return np.array([-hip, leg_a - hip]), 1
-        return np.array([hip, leg_a]), 0
+        leg = stance_from_contacts(o[lay.contact_a], o[lay.contact_b], self.stance_leg)
+        return np.array(encoders_to_q(o[lay.hip], o[lay.leg_a], leg)), leg
 
     def update(self, q: np.ndarray, leg: int, u: float) -> str:
         """Take the decoded measurement of a new tick; ``u`` [input units] is the input applied

@@ -130,18 +130,12 @@ def predict_touchdown(P, x, u, dt, tx, ty, n, xs, ys, nsub, ahead):
 
 @_jit
 def _model_rk4(P, x, u, h):
+    """The state ``x`` after one swing-phase RK4 step of length ``h`` [s] of the model under
+    the held input ``u`` (:func:`envs.physics.model.swing_rk4`), as a new 4-vector."""
+    a1, a2 = model.accelerations(P, x[0], x[1], x[2], x[3], u)
+    r = model.swing_rk4(P, x[0], x[1], x[2], x[3], u, h, a1, a2)
     out = np.empty(4)
-    k = np.empty((4, 4))
-    xt = x.copy()
-    for s in range(4):
-        if s > 0:
-            c = 0.5 * h if s < 3 else h
-            for i in range(4):
-                xt[i] = x[i] + c * k[s - 1, i]
-        a1, a2 = model.accelerations(P, xt[0], xt[1], xt[2], xt[3], u)
-        k[s, 0], k[s, 1], k[s, 2], k[s, 3] = xt[2], xt[3], a1, a2
-    for i in range(4):
-        out[i] = x[i] + h / 6.0 * (k[0, i] + 2.0 * k[1, i] + 2.0 * k[2, i] + k[3, i])
+    out[0], out[1], out[2], out[3] = r[0], r[1], r[2], r[3]
     return out
 
 

@@ -19,6 +19,7 @@ here is vectorised over it. All model quantities come from :mod:`envs.physics.mo
 
 from __future__ import annotations
 
+import math
 from functools import lru_cache
 
 import numpy as np
@@ -36,14 +37,19 @@ __all__ = [
     "cheb_nodes",
     "cumulative_integral",
     "cumulative_integral_matrix",
+    "grid_cumulative_integral",
+    "grid_reduced_integral",
+    "grid_step_time",
     "impact_along_constraint",
     "nominal_accelerations",
     "nominal_input",
     "output_acceleration",
     "pfl_terms",
+    "phase_at",
     "phase_grid",
     "reduced_coefficients",
     "reduced_integral",
+    "step_fractions",
     "step_time",
 ]
 
@@ -67,6 +73,19 @@ def cheb_nodes(n: int) -> np.ndarray:
     if int(n) != n or n < 4:
         raise ValueError(f"grid size n = {n!r}; allowed: integer >= 4")
     return _cheb_matrices(int(n))[0]
+
+
+def step_fractions(n: int) -> np.ndarray:
+    """The ``n + 1`` nodes of :func:`cheb_nodes` mapped onto ``[0, 1]``, increasing: fractions
+    of a step's phase range (``s`` of :class:`controllers.bezier.BezierConstraint`)."""
+    return 0.5 * (cheb_nodes(n) + 1.0)
+
+
+@_jit
+def phase_at(theta_a: float, span: float, s: np.ndarray | float) -> np.ndarray | float:
+    """Phase ``theta_a + span s`` [rad] at the fraction ``s`` of the range ``span`` [rad] that
+    starts at ``theta_a`` [rad] (entry by entry)."""
+    return theta_a + span * s
 
 
 def phase_grid(theta_a: float, theta_b: float, n: int) -> np.ndarray:
@@ -95,6 +114,20 @@ def cumulative_integral(values: np.ndarray, theta_a: float, theta_b: float) -> n
     cheb_nodes(n)
     q = _cheb_matrices(n)[2]
     return 0.5 * (theta_b - theta_a) * (v @ q.T)
+
+
+@_jit
+def grid_cumulative_integral(
+    values: np.ndarray, q: np.ndarray, half: float, out: np.ndarray
+) -> None:
+    """Compiled :func:`cumulative_integral` of one grid: ``out[k] = half (q values)_k``, with
+    ``q`` the :func:`cumulative_integral_matrix` and ``half`` half the grid's interval [rad]."""
+    n = values.size
+    for k in range(n):
+        s = 0.0
+        for j in range(n):
+            s += q[k, j] * values[j]
+        out[k] = half * s
 
 
 class ChebyshevSeries:
@@ -165,6 +198,55 @@ def reduced_integral(
     hint = cumulative_integral(-2.0 * gamma / alpha * e, a, b)
     psi = 1.0 / e
     return psi, psi * hint
+
+
+@_jit
+def grid_reduced_integral(
+    alpha: np.ndarray,
+    beta: np.ndarray,
+    gamma: np.ndarray,
+    q: np.ndarray,
+    half: float,
+    alpha_floor: float,
+    psi: np.ndarray,
+    gam: np.ndarray,
+) -> None:
+    """Compiled :func:`reduced_integral` of one grid: writes ``psi`` and ``Gam`` from
+    ``alpha, beta, gamma`` on the grid's nodes (``q``, ``half``: as for
+    :func:`grid_cumulative_integral`). In the integrands ``alpha`` is floored at
+    ``alpha_floor`` [kg m^2] (``-inf``: no floor)."""
+    n = alpha.size
+    w = np.empty(n)
+    for k in range(n):
+        w[k] = 2.0 * beta[k] / max(alpha[k], alpha_floor)
+    kint = np.empty(n)
+    grid_cumulative_integral(w, q, half, kint)
+    for k in range(n):
+        w[k] = -2.0 * gamma[k] / max(alpha[k], alpha_floor) * math.exp(kint[k])
+    grid_cumulative_integral(w, q, half, gam)
+    for k in range(n):
+        psi[k] = math.exp(-kint[k])
+        gam[k] = psi[k] * gam[k]
+
+
+@_jit
+def grid_step_time(
+    thetadot_sq: np.ndarray,
+    q: np.ndarray,
+    half: float,
+    floor: float,
+    thetadot: np.ndarray,
+    time: np.ndarray,
+) -> None:
+    """Compiled :func:`step_time` of one grid: writes ``thetadot = sqrt(max(thetadot_sq,
+    floor))`` [rad/s] and the time [s] to reach each node from the first (``q``, ``half``: as
+    for :func:`grid_cumulative_integral`; ``floor`` [rad^2/s^2])."""
+    n = thetadot_sq.size
+    w = np.empty(n)
+    for k in range(n):
+        thetadot[k] = math.sqrt(max(thetadot_sq[k], floor))
+        w[k] = 1.0 / thetadot[k]
+    grid_cumulative_integral(w, q, half, time)
 
 
 def step_time(theta: np.ndarray, thetadot_sq: np.ndarray) -> np.ndarray:

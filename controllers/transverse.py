@@ -28,7 +28,13 @@ from scipy.optimize import brentq
 from envs.physics import model
 
 from .bezier import BezierConstraint
-from .reduced import ChebyshevSeries, phase_grid, reduced_coefficients, reduced_integral
+from .reduced import (
+    ChebyshevSeries,
+    nominal_accelerations,
+    phase_grid,
+    reduced_coefficients,
+    reduced_integral,
+)
 
 __all__ = [
     "StepModel",
@@ -109,8 +115,7 @@ class StepModel:
     # ------------------------------------------------------------------ nominal motion
     def derivatives(self, theta: np.ndarray | float) -> tuple[np.ndarray, ...]:
         """``(phi, phi', phi'')`` at ``theta`` (the constraint in power form, fast)."""
-        c = self.constraint
-        s = (np.asarray(theta, dtype=np.float64) - c.theta_plus) / c.span
+        s = self.constraint.s(theta)
         return tuple(npoly.polyval(s, k) for k in self._pc)
 
     def _at(self, theta: float) -> tuple[float, float, float, float]:
@@ -142,7 +147,7 @@ class StepModel:
         th = np.asarray(theta, dtype=np.float64)
         phi, dphi, ddphi = self.derivatives(th)
         al, be, ga = reduced_coefficients(self.P, phi, th, dphi, ddphi)
-        out = -2.0 * (be * self._F(th) + ga) / al
+        out = 2.0 * nominal_accelerations(al, be, ga, dphi, ddphi, self._F(th))[1]
         return float(out) if np.ndim(out) == 0 else out
 
     def nominal_state(self, theta: np.ndarray | float) -> np.ndarray:
@@ -187,14 +192,14 @@ class StepModel:
         al, be, ga = reduced_coefficients(P, phi, th, dphi, ddphi)
         F = self._F(th)
         td = np.sqrt(F)
-        thdd = -(be * F + ga) / al
+        q1dd, thdd = nominal_accelerations(al, be, ga, dphi, ddphi, F)
         # complex step in q1 (and q1d) of the unactuated row
         #   Phi(q1, q1d) = M21(q1) (phi' thdd + phi'' td^2) + M22(q1) thdd + [C qd]_2 + G2
         q1c = phi + 1j * _H
         _, m12, m22 = model.mass_matrix(P, q1c)
         _, c2 = model.coriolis(P, q1c, dphi * td + 0j, td + 0j)
         _, g2 = model.gravity(P, q1c, th + 0j)
-        dPhi_dq1 = np.imag(m12 * (dphi * thdd + ddphi * F) + m22 * thdd + c2 + g2) / _H
+        dPhi_dq1 = np.imag(m12 * q1dd + m22 * thdd + c2 + g2) / _H
         _, c2d = model.coriolis(P, phi + 0j, dphi * td + 1j * _H, td + 0j)
         dPhi_dq1d = np.imag(c2d) / _H
         m12r = model.mass_matrix(P, phi)[1]

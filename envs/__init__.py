@@ -11,8 +11,9 @@ from .physics import (
     Terrain,
     simulate,
 )
+from .physics.encoders import encoders_to_q, q_to_encoders
 from .registration import register_envs
-from .sensors import SensorConfig, SensorLayout, encoders_to_q, q_to_encoders
+from .sensors import SensorConfig, SensorLayout
 from .vector_env import CompassGaitVectorEnv
 
 # Gymnasium environments: the "roughwalk/..." ids are registered on import

@@ -64,7 +64,7 @@ class CompassGaitEnv(gym.Env):
     Gaussian noise (``sensors.encoder_noise`` rad); heights get ``sensors.scan_noise`` m noise
     and ``sensors.scan_resolution`` quantisation; ``sensors.latency`` delays the whole vector
     by whole control periods. The stance leg is not observed directly: it follows from the
-    contact switches (``envs.sensors.encoders_to_q`` maps encoders and stance leg to ``q``).
+    contact switches (``envs.encoders_to_q`` maps encoders and stance leg to ``q``).
 
     ``observation="state"``: the true state, float32 of length ``5 + N``: ``q1, q2`` [rad],
     ``q1dot, q2dot`` [rad/s] (clipped to +-100), ``1.0`` if leg B is the stance leg else

@@ -20,6 +20,7 @@ from dataclasses import dataclass
 import numpy as np
 from numba import njit
 
+from envs.physics import model
 from envs.physics.terrain import Terrain, as_terrain, terrain_height
 
 __all__ = [
@@ -427,11 +428,8 @@ def _foothold_table(
                 ok = ok and (xk >= xf or xf - xk >= edge_margin + rise_margin * (yb - ya))
         ok_edge[k] = ok
         ok_h[k] = d <= max_rise and d >= -max_drop
-        # touchdown configuration (see touchdown_configuration)
         dx = xk - x0
-        chord = math.hypot(dx, d) / (2.0 * l)
-        q1 = 2.0 * math.asin(chord) if chord <= 1.0 else np.nan
-        q2 = math.atan2(-d, dx) + 0.5 * q1
+        q1, q2 = model.touchdown_configuration(dx, d, l)
         ok_reach[k] = q1 >= q1_min and q1 <= q1_max
         if mode == 0:
             score[k] = abs(dx - step_length)

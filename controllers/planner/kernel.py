@@ -6,8 +6,9 @@ compiled loop, what :class:`controllers.planner.problem.StepEvaluator` documents
 dynamics along the constraint, ``theta_dot^2`` and the step time, the nominal input and
 stance-foot reaction, the swing-foot geometry against the terrain (retractable-foot rule,
 vertical faces), the touchdown and impact conditions, and the cost. Every model quantity comes
-from :mod:`envs.physics.model` (its functions compile for scalars) and the reduced dynamics from
-:mod:`controllers.reduced`; only the loops live here.
+from :mod:`envs.physics.model` (its functions compile for scalars), the reduced dynamics and the
+phase grid from :mod:`controllers.reduced` and the constraint's values from
+:mod:`controllers.bezier`; only the loops live here.
 
 The constraints of a row go to the columns of ``G`` that the constraint-group table
 (:data:`controllers.planner.problem.CONSTRAINT_GROUPS`) lays out; the kernel receives each
@@ -28,6 +29,7 @@ from envs.physics.params import PL
 from envs.physics.terrain import terrain_height
 
 from .. import reduced as rd
+from ..bezier import bezier_on_basis, chord_coefficients
 
 __all__ = [
     "StepGrids",
@@ -140,17 +142,6 @@ _jit = njit(cache=True, error_model="numpy")
 
 
 @_jit
-def _cumint(v, q, half, out):
-    """``out[k] = int_{theta_0}^{theta_k} v`` on the Chebyshev grid (``q``: node matrix)."""
-    n = v.size
-    for k in range(n):
-        s = 0.0
-        for j in range(n):
-            s += q[k, j] * v[j]
-        out[k] = half * s
-
-
-@_jit
 def evaluate_steps(
     P, a, thd_plus_in, periodic, use_ref, shape_ref, cfg, step, grids, ground, col, out
 ):
@@ -189,12 +180,9 @@ def evaluate_steps(
     min_thd = cfg.min_thetadot
     thd_ref = max(min_thd, 1e-3)
     lo = 0.25 * min_thd * min_thd
-    ns = step.slope_stance
-    cn = 1.0 / math.sqrt(1.0 + ns * ns)
-    sn = ns * cn
+    nx, ny = model.ground_normal(step.slope_stance)  # under the stance foot
     sl = step.slope_foot
-    ic = 1.0 / math.sqrt(1.0 + sl * sl)
-    ih = sl * ic
+    fnx, fny = model.ground_normal(sl)  # under the foothold
     weight = cfg.weight
     mass = cfg.mass
     arm = cfg.arm
@@ -207,12 +195,11 @@ def evaluate_steps(
     al = np.empty(nn)
     be = np.empty(nn)
     ga = np.empty(nn)
-    w = np.empty(nn)
-    kint = np.empty(nn)
     hint = np.empty(nn)
     psi = np.empty(nn)
     thd = np.empty(nn)
     tcum = np.empty(nn)
+    phg = np.empty(nk)
     cfull = np.empty(nk)
     cret = np.empty(nk)
     fxf = np.empty(nk)
@@ -222,32 +209,17 @@ def evaluate_steps(
     ahead = np.empty(nk)
     for b in range(nb):
         # constraint and its phase derivatives on the nodes
+        bezier_on_basis(a[b], B0, ph)
+        bezier_on_basis(a[b], B1, dph)
+        bezier_on_basis(a[b], B2, ddph)
         for k in range(nn):
-            s0 = 0.0
-            s1 = 0.0
-            s2 = 0.0
-            for i in range(m1):
-                s0 += a[b, i] * B0[k, i]
-                s1 += a[b, i] * B1[k, i]
-                s2 += a[b, i] * B2[k, i]
-            ph[k] = s0
-            dph[k] = s1 / span
-            ddph[k] = s2 / (span * span)
-            th[k] = th0 + span * snodes[k]
+            dph[k] = dph[k] / span
+            ddph[k] = ddph[k] / (span * span)
+            th[k] = rd.phase_at(th0, span, snodes[k])
         # reduced dynamics and its integral theta_dot^2 = psi theta_dot0^2 + Gam
         for k in range(nn):
-            a_, b_, g_ = rd.reduced_coefficients(P, ph[k], th[k], dph[k], ddph[k])
-            al[k] = a_
-            be[k] = b_
-            ga[k] = g_
-            w[k] = 2.0 * b_ / max(a_, al_min)
-        _cumint(w, qint, half, kint)
-        for k in range(nn):
-            w[k] = -2.0 * ga[k] / max(al[k], al_min) * math.exp(kint[k])
-        _cumint(w, qint, half, hint)
-        for k in range(nn):
-            psi[k] = math.exp(-kint[k])
-            hint[k] = psi[k] * hint[k]  # Gam
+            al[k], be[k], ga[k] = rd.reduced_coefficients(P, ph[k], th[k], dph[k], ddph[k])
+        rd.grid_reduced_integral(al, be, ga, qint, half, al_min, psi, hint)  # hint: Gam
         gain = math.nan
         if periodic:
             d, _ = rd.impact_along_constraint(P, ph[nn - 1], dph[nn - 1])
@@ -259,11 +231,8 @@ def evaluate_steps(
             td2 = 0.0
             thp = thd_plus_in[b]
         for k in range(nn):
-            f = psi[k] * thp * thp + hint[k]
-            F[b, k] = f
-            thd[k] = math.sqrt(max(f, lo))
-            w[k] = 1.0 / thd[k]
-        _cumint(w, qint, half, tcum)
+            F[b, k] = psi[k] * thp * thp + hint[k]
+        rd.grid_step_time(F[b], qint, half, lo, thd, tcum)
         T = tcum[nn - 1]
         # nominal input and stance-foot reaction along the motion
         for k in range(nn):
@@ -272,14 +241,16 @@ def evaluate_steps(
             q1dd, q2dd = rd.nominal_accelerations(a_safe, be[k], ga[k], dph[k], ddph[k], f)
             u = rd.nominal_input(P, ph[k], th[k], dph[k], ddph[k], thd[k])
             U[b, k] = u
-            rx, ry = model.ground_reaction(P, ph[k], th[k], dph[k] * thd[k], thd[k], q1dd, q2dd)
-            fn = cn * ry - sn * rx
-            ft = cn * rx + sn * ry
+            fn, ft = model.stance_reaction(
+                P, ph[k], th[k], dph[k] * thd[k], thd[k], q1dd, q2dd, nx, ny
+            )
             G[b, col.thetadot_sq + k] = (F[b, k] - step.fmin) / (thd_ref * thd_ref)
             G[b, col.alpha + k] = al[k] / cfg.alpha_scale - 0.05
             G[b, col.torque + k] = (cfg.u_lim - abs(u)) / cfg.u_max
             G[b, col.stance_reaction + k] = fn / weight
-            G[b, col.stance_reaction + nn + k] = (cfg.friction * fn - abs(ft)) / weight
+            G[b, col.stance_reaction + nn + k] = (
+                model.friction_cone_margin(fn, ft, cfg.friction) / weight
+            )
         for k in range(nk):
             s = 0.0
             for j in range(nn):
@@ -287,16 +258,14 @@ def evaluate_steps(
             G[b, col.thetadot_sq + nn + k] = (s - step.fmin) / (thd_ref * thd_ref)
         # swing foot on the check grid, full length and retracted
         i_arm = -1
+        bezier_on_basis(a[b], Bg, phg)
         for k in range(nk):
-            s0 = 0.0
-            for i in range(m1):
-                s0 += a[b, i] * Bg[k, i]
-            thg = th0 + span * sg[k]
-            x, y = model.swing_foot_position(P, s0, thg, xs, ys, 0.0)
+            thg = rd.phase_at(th0, span, sg[k])
+            x, y = model.swing_foot_position(P, phg[k], thg, xs, ys, 0.0)
             fxf[k] = x
             fyf[k] = y
             cfull[k] = y - terrain_height(tx, ty, nt, x)
-            x, y = model.swing_foot_position(P, s0, thg, xs, ys, ret)
+            x, y = model.swing_foot_position(P, phg[k], thg, xs, ys, ret)
             fxr[k] = x
             fyr[k] = y
             cret[k] = y - terrain_height(tx, ty, nt, x)
@@ -349,16 +318,13 @@ def evaluate_steps(
         q1m, q2m, w1m, w2m = ph[e], th[e], dph[e] * thd[e], thd[e]
         q1p, q2p, w1p, w2p = model.impact(P, q1m, q2m, w1m, w2m)
         delta, slope_plus = rd.impact_along_constraint(P, q1m, dph[e])
-        vxm, vym = model.centre_of_mass_velocity(P, q1m, q2m, w1m, w2m)
-        vxp, vyp = model.centre_of_mass_velocity(P, q1p, q2p, w1p, w2p)
-        ix, iy = mass * (vxp - vxm), mass * (vyp - vym)
-        imp_n = ic * iy - ih * ix
-        imp_t = ic * ix + ih * iy
+        ix, iy = model.impact_impulse(P, q1m, q2m, w1m, w2m, q1p, q2p, w1p, w2p)
+        imp_n, imp_t = model.normal_tangential(ix, iy, fnx, fny)
         sc = mass * l * thd_ref
         G[b, col.impact] = imp_n / sc
-        G[b, col.impact + 1] = (cfg.friction * imp_n - abs(imp_t)) / sc
-        tvx, tvy = model.swing_foot_velocity(P, q1p, q2p, w1p, w2p)
-        G[b, col.trailing_foot] = (cn * tvy - sn * tvx) / (l * thd_ref)
+        G[b, col.impact + 1] = model.friction_cone_margin(imp_n, imp_t, cfg.friction) / sc
+        lift = model.trailing_foot_normal_velocity(P, q1p, q2p, w1p, w2p, nx, ny)
+        G[b, col.trailing_foot] = lift / (l * thd_ref)
         G[b, col.post_impact_speed] = (delta * thd[e] - min_thd) / thd_ref
         if periodic:
             G[b, col.periodic] = 1.0 - gain - 0.02
@@ -381,7 +347,7 @@ def evaluate_steps(
             den = max(abs(chord), 1e-6)
             sh = 0.0
             for i in range(2, m):
-                rel = (a[b, i] - (a[b, 0] + chord * i / m)) / den
+                rel = (a[b, i] - chord_coefficients(a[b, 0], a[b, m], i, m)) / den
                 sh += (rel - shape_ref[i]) ** 2
             cost += ws * cfg.w_shape * sh
         out.cost[b] = cost
@@ -390,7 +356,7 @@ def evaluate_steps(
         out.delta[b] = delta
         out.slope_plus[b] = slope_plus
         out.speed[b] = v
-        out.arm_theta[b] = th0 + span * s_cross if i_arm >= 0 else math.nan
+        out.arm_theta[b] = rd.phase_at(th0, span, s_cross) if i_arm >= 0 else math.nan
         out.thetadot_plus[b] = thp
         out.gain[b] = gain
 

@@ -35,7 +35,7 @@ from envs.physics import model
 from envs.physics.params import RobotParams
 
 from .. import reduced as rd
-from ..bezier import bernstein_basis
+from ..bezier import BezierConstraint, bernstein_basis, chord_coefficients
 from . import kernel
 from .config import PlannerConfig
 from .footholds import TerrainMap
@@ -203,7 +203,7 @@ class GaitReference(NamedTuple):
 def gait_reference(gait: PeriodicGait) -> GaitReference:
     """The :class:`GaitReference` of a periodic gait."""
     a = gait.step.coeffs
-    base = a[0] + (a[-1] - a[0]) * np.arange(a.size) / (a.size - 1)
+    base = chord_coefficients(a[0], a[-1], np.arange(a.size), a.size - 1)
     rel = (a - base) / (a[-1] - a[0])
     return GaitReference(
         gait.step.thetadot_minus, gait.step.slope_plus, rel, gait.speed, gait.step.delta
@@ -228,7 +228,7 @@ class StepEvaluator:
         self.params, self.cfg, self.tmap = params, config, tmap
         self.P = params.vector()
         n, m = config.grid, config.order
-        s = 0.5 * (rd.cheb_nodes(n) + 1.0)
+        s = rd.step_fractions(n)
         B = [bernstein_basis(m, s, d) for d in range(3)]
         l = params.l  # noqa: E741
         self.l = l
@@ -264,7 +264,7 @@ class StepEvaluator:
             friction=config.friction,
             duration_min=config.duration_min,
             duration_max=config.duration_max,
-            weight=(2 * params.m + params.mHg) * params.g,
+            weight=model.weight(self.P),
             mass=params.total_mass,
             w_speed=config.w_speed,
             w_torque=config.w_torque,
@@ -295,7 +295,7 @@ class StepEvaluator:
             _, sl = rd.impact_along_constraint(
                 self.P, a[..., m], m * (a[..., m] - a[..., m - 1]) / span
             )
-        a[..., 1] = fx.a0 + sl * span / m
+        a[..., 1] = BezierConstraint.second_coeff(fx.a0, sl, fx.theta_plus, fx.theta_minus, m)
         return a
 
     def evaluate(self, fx: FixedStep, free: np.ndarray, periodic: bool = False) -> dict[str, Any]:

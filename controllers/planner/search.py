@@ -25,7 +25,7 @@ import numpy as np
 from envs.physics import model
 from envs.physics.params import RobotParams
 
-from ..bezier import BezierConstraint
+from ..bezier import BezierConstraint, chord_coefficients
 from .config import PlannerConfig, PlanningError
 from .footholds import FootholdChains, TerrainMap, touchdown_configuration
 from .plan import PeriodicGait, Plan, StepPlan
@@ -256,9 +256,8 @@ class StepSearch:
         next step will gain or lose (slow down before a drop, speed up before a rise)."""
         gait = self.gait
         dh = float(self.tmap.height(foothold[0] + self.config.step_length)) - foothold[1]
-        pr = self.params
         m22 = model.mass_matrix(self.P, q1m)[2]
-        f = gait.step.thetadot_minus**2 + 2.0 * (2 * pr.m + pr.mHg) * pr.g * dh / m22
+        f = gait.step.thetadot_minus**2 + 2.0 * model.weight(self.P) * dh / m22
         return math.sqrt(max(f, (1.5 * self.config.min_thetadot) ** 2))
 
     def _theta_target(self, theta_plus: float) -> float:
@@ -378,7 +377,9 @@ class StepSearch:
             memo.solved[key] = ev["a"][2:-1].copy()
             return ev, True
         chord = fx.a_last - fx.a0
-        base = fx.a0 + chord * np.arange(2, self.config.order) / self.config.order
+        base = chord_coefficients(
+            fx.a0, fx.a_last, np.arange(2, self.config.order), self.config.order
+        )
         samples = _global_samples(self.config.order)
         scores = [
             (float(np.sum(np.minimum(g, 0.0))), -c)
@@ -412,5 +413,5 @@ def _global_samples(order: int) -> np.ndarray:
 
 def _shape_guess(rel: np.ndarray, a0: float, a_last: float, order: int) -> np.ndarray:
     k = np.arange(order + 1)
-    base = a0 + (a_last - a0) * k / order
+    base = chord_coefficients(a0, a_last, k, order)
     return (base + rel * (a_last - a0))[2:-1]

@@ -144,11 +144,16 @@ def swing_rk4(P, q1, q2, q1d, q2d, u, h, q1dd, q2dd):
 
 
 @_jit
+def weight(P):
+    """Weight of the whole robot ``g (2 m + mHg)`` [N] (gravitational masses)."""
+    return P[PG] * (2.0 * P[PM] + P[PMHG])
+
+
+@_jit
 def potential_energy(P, q1, q2, ys):
     """Potential energy [J] at ``(q1, q2)`` [rad] with the stance foot at height ``ys`` [m]
     (gravitational masses)."""
-    mg_total = P[PG] * (2.0 * P[PM] + P[PMHG])
-    return (P[P4] + P[P5]) * np.cos(q2) - P[P4] * np.cos(q2 - q1) + mg_total * ys
+    return (P[P4] + P[P5]) * np.cos(q2) - P[P4] * np.cos(q2 - q1) + weight(P) * ys
 
 
 @_jit
@@ -238,6 +243,18 @@ def swing_foot_position(P, q1, q2, xs, ys, retract=0.0):
 
 
 @_jit
+def touchdown_configuration(dx, dh, l):
+    """Pre-impact ``(q1, q2)`` [rad] that puts the swing foot at ``(dx, dh)`` [m] from the
+    stance foot with both legs at full length ``l`` [m] (the inverse of
+    :func:`swing_foot_position`): ``l (sin q2 - sin(q2 - q1)) = dx``,
+    ``l (cos q2 - cos(q2 - q1)) = dh``; ``q1`` is ``NaN`` where the foothold is out of reach.
+    Scalars only."""
+    chord = math.hypot(dx, dh) / (2.0 * l)
+    q1 = 2.0 * math.asin(chord) if chord <= 1.0 else math.nan
+    return q1, math.atan2(-dh, dx) + 0.5 * q1
+
+
+@_jit
 def swing_foot_velocity(P, q1, q2, q1d, q2d):
     """Swing-foot velocity ``(vx, vy)`` [m/s] at ``(q1, q2)`` [rad], ``(q1d, q2d)`` [rad/s]
     (stance foot fixed)."""
@@ -269,7 +286,7 @@ def ground_reaction(P, q1, q2, q1d, q2d, q1dd, q2dd):
     Newton's law on the whole robot: inertial masses times accelerations of the bodies minus
     the gravitational force (gravitational hip mass ``mHg``).
     """
-    l, lc, m, mh, mhg, g = P[PL], P[PLC], P[PM], P[PMH], P[PMHG], P[PG]  # noqa: E741
+    l, lc, m, mh = P[PL], P[PLC], P[PM], P[PMH]  # noqa: E741
     s2, c2 = np.sin(q2), np.cos(q2)
     s = q2 - q1
     sd = q2d - q1d
@@ -283,7 +300,7 @@ def ground_reaction(P, q1, q2, q1d, q2d, q1dd, q2dd):
     # stance leg com (lc along q2), hip (l along q2), swing com (hip - (l - lc) along s)
     max_ = m * lc * ax2 + mh * l * ax2 + m * (l * ax2 - (l - lc) * axs)
     may_ = m * lc * ay2 + mh * l * ay2 + m * (l * ay2 - (l - lc) * ays)
-    return max_, may_ + g * (2.0 * m + mhg)
+    return max_, may_ + weight(P)
 
 
 # ---------------------------------------------------------------------------- momenta
@@ -387,10 +404,19 @@ def normal_tangential(fx, fy, nx, ny):
 
 
 @_jit
+def friction_cone_margin(fn, ft, mu):
+    """Margin ``mu fn - |ft|`` [N or N s] of a contact force [N] or impulse [N s] with normal
+    component ``fn`` and tangential component ``ft`` inside the friction cone of coefficient
+    ``mu`` (dimensionless): negative outside the cone."""
+    return mu * fn - abs(ft)
+
+
+@_jit
 def outside_friction_cone(fn, ft, mu):
     """Whether a contact force [N] or impulse [N s] with normal component ``fn`` and tangential
-    component ``ft`` lies outside the friction cone ``|ft| <= mu fn`` (``mu`` dimensionless)."""
-    return abs(ft) > mu * fn
+    component ``ft`` lies outside the friction cone ``|ft| <= mu fn`` (``mu`` dimensionless):
+    :func:`friction_cone_margin` negative."""
+    return friction_cone_margin(fn, ft, mu) < 0.0
 
 
 @_jit

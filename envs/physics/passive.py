@@ -10,12 +10,54 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 from dataclasses import dataclass
+from typing import NamedTuple
 
 import numpy as np
 
 from .params import RobotParams
 from .simulator import SimConfig, simulate
 from .terrain import Terrain
+
+
+class CycleStart(NamedTuple):
+    """Post-impact state of a passive cycle down a slope, in the terms of the control notes.
+
+    Attributes:
+        slope: ground angle [rad], negative downhill.
+        q2: stance-leg angle [rad].
+        swing: swing-leg angle ``q2 - q1`` [rad].
+        q2d: stance-leg rate [rad/s].
+        swing_rate: swing-leg rate ``q2d - q1d`` [rad/s].
+    """
+
+    slope: float
+    q2: float
+    swing: float
+    q2d: float
+    swing_rate: float
+
+    @property
+    def q(self) -> tuple[float, float]:
+        """``(q1, q2)`` [rad]."""
+        return (self.q2 - self.swing, self.q2)
+
+    @property
+    def qd(self) -> tuple[float, float]:
+        """``(q1d, q2d)`` [rad/s]."""
+        return (self.q2d - self.swing_rate, self.q2d)
+
+    @property
+    def section(self) -> tuple[float, float, float]:
+        """The post-impact section point ``(q2, q1d, q2d)`` [rad, rad/s] (see
+        :func:`slope_section_state`)."""
+        return (self.q2, self.q2d - self.swing_rate, self.q2d)
+
+
+#: the classic walker's passive cycle down a 0.0525 rad slope (control notes, section 1), to six
+#: digits: a start state near the cycle and a guess for :func:`passive_limit_cycle`
+CLASSIC_CYCLE = CycleStart(
+    slope=-0.0525, q2=-0.218775, swing=0.323775, q2d=1.092867, swing_rate=0.376135
+)
 
 
 @dataclass(frozen=True)

@@ -18,6 +18,7 @@ import numba
 import numpy as np
 
 from ..config_util import reject_moved_fields
+from . import model
 from .kernel import (
     C_FACE,
     C_FALL_H,
@@ -345,7 +346,7 @@ class Simulator:
             q1, q2 = q[j]
             if abs(q2) > cfg.q2_limit:
                 raise ValueError(f"q0[1] = {q2} out of range; allowed |q2| <= {cfg.q2_limit}")
-            hx, hy = fx + p.l * math.sin(q2), fy + p.l * math.cos(q2)
+            hx, hy = model.hip_position(self._P[i], q1, q2, fx, fy)
             if hy - ter.height(hx) < cfg.fall_height * p.l:
                 raise ValueError(
                     f"start state has the hip {hy - ter.height(hx):.4g} m above the ground; "

@@ -3,9 +3,8 @@
 import re
 
 from commands.cli import main
-from commands.passive import CYCLE_GUESS
 from envs import RobotParams
-from envs.physics.passive import passive_limit_cycle
+from envs.physics.passive import CLASSIC_CYCLE, passive_limit_cycle
 
 
 def test_passive_walk_converges_to_the_limit_cycle(capsys):
@@ -13,7 +12,9 @@ def test_passive_walk_converges_to_the_limit_cycle(capsys):
     out = capsys.readouterr().out
     # the command prints the cycle it found (its figures are asserted in the physics tests), and
     # a distance to it that shrinks over the run
-    cycle = passive_limit_cycle(RobotParams.from_preset("classic"), -0.0525, CYCLE_GUESS)
+    cycle = passive_limit_cycle(
+        RobotParams.from_preset("classic"), CLASSIC_CYCLE.slope, CLASSIC_CYCLE.section
+    )
     assert f"{cycle.period:.6f}" in out and f"{cycle.step_length:.6f}" in out
     dists = [float(m) for m in re.findall(r"(\d\.\d+e[-+]\d+)\W*$", out, flags=re.M)]
     assert len(dists) >= 10

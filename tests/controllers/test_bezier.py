@@ -8,6 +8,7 @@ from controllers.bezier import (
     bernstein_basis,
     bezier,
     bezier_derivative_coeffs,
+    chord_coefficients,
 )
 
 
@@ -77,3 +78,15 @@ def test_bad_input_raises():
         bernstein_basis(-1, 0.5)
     with pytest.raises(ValueError, match="coeffs"):
         bezier(np.zeros((2, 2, 2)), 0.5)
+
+
+def test_chord_coefficients_run_straight_from_the_first_to_the_last():
+    k = np.arange(5)
+    line = chord_coefficients(-0.4, 0.5, k, 4)
+    assert line[0] == -0.4 and line[-1] == 0.5
+    np.testing.assert_allclose(np.diff(line), 0.9 / 4, rtol=1e-14)
+    # the scalar form (the planner kernel's) gives the same coefficients
+    assert [chord_coefficients(-0.4, 0.5, int(i), 4) for i in k] == line.tolist()
+    # a Bezier polynomial on its chord is a straight line in s
+    s = np.linspace(0.0, 1.0, 7)
+    np.testing.assert_allclose(bezier(line, s), -0.4 + 0.9 * s, atol=1e-15)

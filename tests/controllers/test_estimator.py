@@ -8,6 +8,7 @@ import controllers.estimator
 import envs  # registers the ids
 from controllers import make_reference_policy
 from controllers.estimator import SensorStateEstimator
+from envs.physics.encoders import encoders_to_q, q_to_encoders, stance_from_contacts
 
 
 def test_estimate_follows_the_true_state_through_impacts():
@@ -68,3 +69,27 @@ def test_touchdowns_count_from_the_robots_arming_distance(monkeypatch):
     monkeypatch.setattr(controllers.estimator, "predict_touchdown", spy)
     assert est.update(q, 1 - leg, 0.0) == "impact"
     assert seen[0] == 0.3 * robot.l
+
+
+def test_decode_is_the_encoder_model():
+    """The estimator decodes with the robot's encoder model: either stance leg, and the stance
+    leg kept when the contact switches do not name one."""
+    env = gym.make("roughwalk/CompassGaitFlat-v0")
+    est = SensorStateEstimator(env)
+    obs, _ = env.reset(seed=0)
+    lay = est.layout
+    o = np.array(obs, dtype=np.float64)
+    for leg in (0, 1):
+        hip, leg_a = q_to_encoders(0.3, -0.1, leg)
+        o[lay.hip], o[lay.leg_a] = hip, leg_a
+        o[lay.contact_a], o[lay.contact_b] = float(leg == 0), float(leg == 1)
+        q, got = est.decode(o)
+        assert got == leg and q.tolist() == list(encoders_to_q(hip, leg_a, leg))
+        np.testing.assert_allclose(q, [0.3, -0.1], atol=1e-15)
+    for both in (0.0, 1.0):
+        o[lay.contact_a] = o[lay.contact_b] = both
+        for prev in (0, 1):
+            est.stance_leg = prev
+            q, got = est.decode(o)
+            assert got == stance_from_contacts(both, both, prev) == prev
+            assert q.tolist() == list(encoders_to_q(o[lay.hip], o[lay.leg_a], prev))

@@ -7,19 +7,20 @@ import pytest
 
 from controllers.observer import HighGainObserver, observer_update, predict_touchdown
 from envs.physics.params import RobotParams
+from envs.physics.passive import CLASSIC_CYCLE
 from envs.physics.simulator import Simulator
 from envs.physics.terrain import Terrain
 
 # classic walker's passive limit cycle down a 0.0525 rad slope (control notes, section 1)
-Q0 = np.array([-0.218775 - 0.323775, -0.218775])
-QD0 = np.array([1.092867 - 0.376135, 1.092867])
+Q0 = np.array(CLASSIC_CYCLE.q)
+QD0 = np.array(CLASSIC_CYCLE.qd)
 DT = 0.005
 
 
 def _run(robot, observer, T, quantum=0.0, locate=True):
     """Passive walk; the observer sees (optionally quantised) angles only. Returns the time,
     true states, estimates, and touchdown errors (time [s], foothold [m])."""
-    terrain = Terrain.slope(-0.0525)
+    terrain = Terrain.slope(CLASSIC_CYCLE.slope)
     sim = Simulator(robot, terrain, 1, dt=DT)
     sim.reset(Q0, QD0)
     tx, ty = terrain.arrays()

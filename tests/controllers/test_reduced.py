@@ -118,3 +118,38 @@ def test_bad_grid_and_nonpositive_speed_raise():
     th = rd.phase_grid(0.0, 1.0, 8)
     with pytest.raises(ValueError, match="theta_dot"):
         rd.step_time(th, np.linspace(1.0, -0.1, 9))
+
+
+@pytest.mark.parametrize("robot", ROBOTS)
+def test_the_compiled_grid_integrals_are_the_reduced_integral_and_step_time(robot):
+    """The planner kernel's integrals on one grid: without a floor they are
+    :func:`reduced_integral` and :func:`step_time`; the floors bound ``alpha`` and
+    ``theta_dot^2`` from below in the integrands."""
+    P = RobotParams.from_preset(robot).vector()
+    n = 24
+    th = rd.phase_grid(C.theta_plus, C.theta_minus, n)
+    al, be, ga = _abg(P, C, th)
+    q = rd.cumulative_integral_matrix(n)
+    half = 0.5 * (th[-1] - th[0])
+    psi, gam = np.empty(n + 1), np.empty(n + 1)
+    rd.grid_reduced_integral(al, be, ga, q, half, -np.inf, psi, gam)
+    ref_psi, ref_gam = rd.reduced_integral(th, al, be, ga)
+    np.testing.assert_allclose(psi, ref_psi, rtol=1e-13)
+    np.testing.assert_allclose(gam, ref_gam, rtol=1e-12, atol=1e-13)
+    floor = 0.5 * (al.min() + al.max())
+    rd.grid_reduced_integral(al, be, ga, q, half, floor, psi, gam)
+    ref_psi, ref_gam = rd.reduced_integral(th, np.maximum(al, floor), be, ga)
+    np.testing.assert_allclose(psi, ref_psi, rtol=1e-13)
+    np.testing.assert_allclose(gam, ref_gam, rtol=1e-12, atol=1e-13)
+    f = ref_psi * 1.5**2 + ref_gam
+    thd, t = np.empty(n + 1), np.empty(n + 1)
+    rd.grid_step_time(f, q, half, 0.0, thd, t)
+    np.testing.assert_allclose(t, rd.step_time(th, f), rtol=1e-13, atol=1e-15)
+    assert np.array_equal(thd, np.sqrt(f))
+    lo = f.mean()
+    rd.grid_step_time(f, q, half, lo, thd, t)
+    np.testing.assert_allclose(t, rd.step_time(th, np.maximum(f, lo)), rtol=1e-13, atol=1e-15)
+    # the compiled cumulative integral is the vectorised one
+    out = np.empty(n + 1)
+    rd.grid_cumulative_integral(np.cos(th), q, half, out)
+    np.testing.assert_allclose(out, rd.cumulative_integral(np.cos(th), th[0], th[-1]), atol=1e-15)

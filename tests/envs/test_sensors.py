@@ -1,4 +1,4 @@
-"""Sensor models: encoder geometry, quantisation, noise statistics, latency, stance inference."""
+"""Sensor models: quantisation, noise statistics, latency, stance inference."""
 
 from __future__ import annotations
 
@@ -8,43 +8,13 @@ import numpy as np
 import pytest
 
 from envs.env import CompassGaitEnv
-from envs.sensors import (
-    SensorConfig,
-    SensorLayout,
-    encoders_to_q,
-    q_to_encoders,
-    seed_streams,
-    stance_from_contacts,
-    standard_normal,
-)
+from envs.physics.encoders import q_to_encoders
+from envs.sensors import SensorConfig, SensorLayout, seed_streams, standard_normal
 
 QUIET = {"encoder_noise": 0.0, "scan_noise": 0.0, "encoder_resolution": 0.0, "scan_resolution": 0.0}
 
 
-def test_encoder_geometry_round_trip() -> None:
-    rng = np.random.default_rng(0)
-    q1, q2 = rng.uniform(-1, 1, 50), rng.uniform(-1, 1, 50)
-    for leg in (0, 1):
-        hip, leg_a = q_to_encoders(q1, q2, leg)
-        back = encoders_to_q(hip, leg_a, leg)
-        np.testing.assert_allclose(back, (q1, q2), atol=1e-15)
-    # physical meaning: leg A's absolute angle is q2 when A stands, the swing angle otherwise
-    assert q_to_encoders(0.4, 0.1, 0) == (0.4, 0.1)
-    hip, leg_a = q_to_encoders(0.4, 0.1, 1)
-    assert leg_a == pytest.approx(0.1 - 0.4) and hip == pytest.approx(-0.4)
-    # the hip encoder does not flip sign at an impact: alpha_A - alpha_B is continuous
-    # (impact q+ = (-q1, q2 - q1) with the legs swapped)
-    q1m, q2m = 0.5, 0.25
-    before = q_to_encoders(q1m, q2m, 0)
-    after = q_to_encoders(-q1m, q2m - q1m, 1)
-    np.testing.assert_allclose(before, after, atol=1e-15)
-
-
-def test_stance_from_contacts_and_decode() -> None:
-    assert stance_from_contacts(1.0, 0.0) == 0
-    assert stance_from_contacts(0.0, 1.0) == 1
-    assert stance_from_contacts(1.0, 1.0, previous=1) == 1
-    assert stance_from_contacts(0.0, 0.0) == 0
+def test_layout_decodes_encoders_contacts_and_scan() -> None:
     layout = SensorLayout(3, (0.1, 0.2, 0.3))
     obs = np.array([-0.4, -0.3, 0.0, 1.0, 0.01, 0.02, 0.03], dtype=np.float32)
     d = layout.decode(obs)

@@ -13,6 +13,7 @@ from controllers.planner.footholds import (
     candidate_footholds,
     touchdown_configuration,
 )
+from envs.physics import model
 from envs.physics.terrain import Terrain
 
 TERRAINS = {
@@ -151,3 +152,18 @@ def test_coerce_resolves_terrain_arguments_like_the_simulator():
     assert len(scanned.faces) == 2
     with pytest.raises(ValueError, match="unknown terrain"):
         TerrainMap.coerce("stairs")
+
+
+def test_the_compiled_touchdown_configuration_is_the_public_one():
+    """The foothold table's touchdown configuration (the model's, compiled) and the public
+    vectorised one agree, also out of reach."""
+    rng = np.random.default_rng(5)
+    dx, dh = rng.uniform(0.05, 0.7, 200), rng.uniform(-0.1, 0.1, 200)
+    q1, q2 = touchdown_configuration(dx, dh, 0.32)
+    assert np.isnan(q1[np.hypot(dx, dh) > 0.64]).all()
+    for k in range(dx.size):
+        r1, r2 = model.touchdown_configuration(dx[k], dh[k], 0.32)
+        np.testing.assert_allclose([q1[k], q2[k]], [r1, r2], rtol=1e-15, atol=1e-15)
+    assert touchdown_configuration(0.3, 0.01, 0.32) == pytest.approx(
+        model.touchdown_configuration(0.3, 0.01, 0.32), rel=1e-15, abs=1e-15
+    )

@@ -158,3 +158,25 @@ def test_heel_strike_on_flat_ground_is_admissible_and_a_backward_throw_is_not():
     post = model.impact(P, *pre)
     assert model.trailing_foot_normal_velocity(P, *post, 0.0, 1.0) <= 0.0
     assert not model.impact_admissible(P, *pre, *post, 0.0, 1.0, 0.0, 1.0, 1.0)
+
+
+@pytest.mark.parametrize("preset", ["classic", "paper"])
+def test_touchdown_configuration_puts_the_full_length_swing_foot_on_the_foothold(preset):
+    params = RobotParams.from_preset(preset)
+    P, l = params.vector(), params.l  # noqa: E741
+    rng = np.random.default_rng(3)
+    for dx, dh in zip(rng.uniform(0.2, 1.2, 20) * l, rng.uniform(-0.3, 0.3, 20) * l):
+        q1, q2 = model.touchdown_configuration(dx, dh, l)
+        fx, fy = model.swing_foot_position(P, q1, q2, 0.0, 0.0)
+        assert abs(fx - dx) < 1e-13 * l and abs(fy - dh) < 1e-13 * l
+        # both legs at full length: the hip is symmetric over the chord
+        assert model.hip_position(P, q1, q2, 0.0, 0.0)[1] > max(0.0, dh)
+    assert math.isnan(model.touchdown_configuration(2.1 * l, 0.0, l)[0])
+
+
+def test_weight_is_the_gravitational_mass_times_g():
+    params = RobotParams.from_preset("paper")
+    P = params.vector()
+    assert model.weight(P) == (2 * params.m + params.mHg) * params.g
+    # the swing-phase ground reaction carries the weight at rest
+    assert model.ground_reaction(P, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0)[1] == model.weight(P)

@@ -4,18 +4,22 @@ robot's stable passive gait."""
 import numpy as np
 
 from envs.physics import RobotParams, SimConfig, Terrain, simulate
-from envs.physics.passive import passive_limit_cycle, slope_section_state, slope_step_map
+from envs.physics.passive import (
+    CLASSIC_CYCLE,
+    passive_limit_cycle,
+    slope_section_state,
+    slope_step_map,
+)
 
 CLASSIC = RobotParams.from_preset("classic")
 PAPER = RobotParams.from_preset("paper")
-SLOPE = -0.0525
 # post-impact state of the classic walker's passive cycle (control notes, section 1)
-Q2P, SWING, Q2DP, SWINGD = -0.218775, 0.323775, 1.092867, 0.376135
-QD0 = (Q2DP - SWINGD, Q2DP)
+SLOPE, Q2P, SWING, Q2DP, SWINGD = CLASSIC_CYCLE
+QD0 = CLASSIC_CYCLE.qd
 
 
 def test_classic_passive_limit_cycle_matches_the_reference():
-    cyc = passive_limit_cycle(CLASSIC, SLOPE, (Q2P, QD0[0], QD0[1]))
+    cyc = passive_limit_cycle(CLASSIC, SLOPE, CLASSIC_CYCLE.section)
     z = cyc.state[[1, 2, 3]]
     assert np.max(np.abs(slope_step_map(CLASSIC, SLOPE, z, SimConfig.accurate())[0] - z)) < 1e-10
     q1, q2, q1d, q2d = cyc.state
@@ -31,13 +35,21 @@ def test_classic_passive_limit_cycle_matches_the_reference():
     assert np.array_equal(np.round(moduli, 3), [0.580, 0.580, 0.131])
 
 
+def test_the_classic_cycle_start_is_one_state_in_three_forms():
+    assert CLASSIC_CYCLE.q == (Q2P - SWING, Q2P) and CLASSIC_CYCLE.qd == (Q2DP - SWINGD, Q2DP)
+    assert CLASSIC_CYCLE.section == (Q2P, Q2DP - SWINGD, Q2DP)
+    # both feet on the slope to the six digits of the constants
+    q, qd = slope_section_state(CLASSIC_CYCLE.section, SLOPE)
+    assert np.allclose(q, CLASSIC_CYCLE.q, rtol=0, atol=1e-6) and qd.tolist() == list(QD0)
+
+
 def test_section_state_puts_both_feet_on_the_slope():
-    q, qd = slope_section_state((Q2P, QD0[0], QD0[1]), SLOPE)
+    q, qd = slope_section_state(CLASSIC_CYCLE.section, SLOPE)
     assert q.tolist() == [2.0 * (Q2P + SLOPE), Q2P] and qd.tolist() == list(QD0)
 
 
 def test_paper_robot_walks_passively_with_friction_and_retractable_feet():
-    cyc = passive_limit_cycle(PAPER, SLOPE, (Q2P, QD0[0], QD0[1]))
+    cyc = passive_limit_cycle(PAPER, SLOPE, CLASSIC_CYCLE.section)
     assert np.max(np.abs(cyc.eigenvalues)) < 1.0 and 0.1 < cyc.step_length < 0.3
     q, qd = cyc.state[:2] + (0.0, 0.0), cyc.state[2:] * 1.02
     res = simulate(PAPER, Terrain.slope(SLOPE), q, qd, 6.0)

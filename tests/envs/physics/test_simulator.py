@@ -16,14 +16,13 @@ from envs.physics import (
     model,
     simulate,
 )
+from envs.physics.passive import CLASSIC_CYCLE
 
 CLASSIC = RobotParams.from_preset("classic")
 PAPER = RobotParams.from_preset("paper")
-SLOPE = -0.0525
 # post-impact state of the classic walker's passive cycle (control notes, section 1)
-Q2P, SWING, Q2DP, SWINGD = -0.218775, 0.323775, 1.092867, 0.376135
-Q0 = (Q2P - SWING, Q2P)
-QD0 = (Q2DP - SWINGD, Q2DP)
+SLOPE, Q2P, SWING, Q2DP, SWINGD = CLASSIC_CYCLE
+Q0, QD0 = CLASSIC_CYCLE.q, CLASSIC_CYCLE.qd
 # the stance foot on a narrow pillar over a deep pit: the swing foot never meets the ground
 PILLAR = Terrain.from_points([-1, -0.05, -0.05, 0.05, 0.05, 1], [-5, -5, 0, 0, -5, -5])
 FREE = {"check_reaction": False}
