@@ -47,7 +47,8 @@ def stance_from_contacts(
 def encoders_to_q(
     hip: float | np.ndarray, leg_a: float | np.ndarray, stance_leg: int | np.ndarray
 ) -> tuple[Any, Any]:
-    """Paper coordinates ``(q1, q2)`` [rad] from the two encoder angles [rad] and the stance leg.
+    """Paper coordinates ``(q1, q2)`` [rad] from the encoder angles ``hip`` and ``leg_a`` [rad]
+    and the ``stance_leg`` (0 = A, 1 = B; scalars or arrays of one shape).
 
     Leg A in stance (0): ``q1 = hip``, ``q2 = leg_a``; leg B in stance (1): ``q1 = -hip``,
     ``q2 = leg_a - hip``.
@@ -63,8 +64,8 @@ def encoders_to_q(
 def q_to_encoders(
     q1: float | np.ndarray, q2: float | np.ndarray, stance_leg: int | np.ndarray
 ) -> tuple[Any, Any]:
-    """Ideal encoder readings ``(hip, leg_a)`` [rad] for the paper coordinates ``(q1, q2)``
-    [rad] and the stance leg."""
+    """Ideal encoder readings ``(hip, leg_a)`` [rad] for the paper coordinates ``q1``, ``q2``
+    [rad] and the ``stance_leg`` (0 = A, 1 = B; scalars or arrays of one shape)."""
     b = np.asarray(stance_leg) == 1
     hip = np.where(b, -np.asarray(q1), q1)
     leg_a = np.where(b, np.asarray(q2) - np.asarray(q1), q2)
