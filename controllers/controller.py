@@ -32,9 +32,8 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
-import yaml
 
-from envs.config_util import dataclass_from_mapping
+from envs.config_util import dataclass_from_mapping, read_yaml_mapping
 from envs.physics import model
 from envs.physics.params import RobotParams, as_params
 from envs.physics.simulator import SimConfig, Simulator
@@ -124,8 +123,7 @@ class ControllerConfig:
     def from_yaml(cls, path: str | Path) -> ControllerConfig:
         """Build from the YAML file at ``path`` holding the fields (unknown keys raise
         ``ValueError``)."""
-        with open(path) as fh:
-            return cls.from_dict(yaml.safe_load(fh) or {})
+        return cls.from_dict(read_yaml_mapping(path, "controller config"))
 
     def to_dict(self) -> dict[str, Any]:
         """The fields as a plain dict (the inverse of :meth:`from_dict`)."""

@@ -16,6 +16,7 @@ terrain scan, the latest observation and its delay line).
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 from typing import Any
 
@@ -77,6 +78,8 @@ def _post_walker(i, P, q, foot, status, nimp, work, new_fail, weights, hip_x, di
     r = weights[W_PROGRESS] * progress - weights[W_ENERGY] * w
     if new_fail[i]:
         r -= weights[W_FAILURE]
+    if not math.isfinite(r):  # never with the simulator's divergence check; kept finite anyway
+        r = -weights[W_FAILURE]
     reward[i] = r
     terminated[i] = status[i] != 0
 
@@ -322,7 +325,11 @@ class WalkerBatch:
             self.specs[i] = terrain.to_dict()
         self.terrains[i] = terrain
         q, qd, leg = s.initial_state.sample(rng, opts.get("state"), opts.get("stance_leg"))
-        self.sim.reset(q, qd, index=i, stance_leg=leg)
+        try:
+            self.sim.reset(q, qd, index=i, stance_leg=leg)
+        except ValueError as exc:
+            source = "reset option 'state'" if opts.get("state") is not None else "initial_state"
+            raise ValueError(f"{source}: {exc}") from None
         o.streams[i] = seed_streams(rng, 1)[0]
         hx, _ = model.hip_position(self._P, v.q[i, 0], v.q[i, 1], *v.stance_foot[i])
         self.episode.reset(i, hx)

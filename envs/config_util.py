@@ -7,15 +7,80 @@ not fields (naming them and listing the allowed ones) and required fields that a
 turn a constructor ``TypeError`` into a ``ValueError``. A setting that moved to another object
 is listed in the dataclass's ``MOVED_FIELDS`` (name -> where it is set now); giving it, as a
 mapping key or a keyword argument (:func:`reject_moved_fields`), fails naming its replacement.
+
+:func:`read_yaml_mapping` is the one reader of the YAML files behind these settings (env, robot,
+terrain, planner and controller files): a syntax error or a document that is not a mapping is a
+``ValueError`` naming the file and what is wrong.
 """
 
 from __future__ import annotations
 
+import os
 from collections.abc import Mapping
 from dataclasses import MISSING, fields, is_dataclass
 from typing import Any, TypeVar
 
+import yaml
+
 T = TypeVar("T")
+
+try:  # libyaml's parser when PyYAML has it: the same documents, several times faster
+    _YAML_LOADER: type = yaml.CSafeLoader
+except AttributeError:
+    _YAML_LOADER = yaml.SafeLoader
+
+
+def read_yaml_mapping(
+    path: str | os.PathLike,
+    what: str,
+    *,
+    allow_empty: bool = True,
+    holds: str = "mapping of settings",
+) -> dict[str, Any]:
+    """The mapping in the YAML file at ``path`` (safe loader: plain data only).
+
+    Args:
+        path: the file.
+        what: what the file holds, for the messages (``"env config"``, ``"robot"``,
+            ``"terrain"``, ``"planner config"``, ``"controller config"``).
+        allow_empty: an empty file (or one of comments only) gives ``{}``; otherwise it is an
+            error.
+        holds: what the mapping is, for the messages (``"must hold a {holds}"``).
+
+    Raises:
+        ValueError: the file is not valid YAML (``"{what} file '...' is not valid YAML: line L,
+            column C: problem"``), is empty (unless ``allow_empty``) or holds something other
+            than a mapping (a list, a string, ...).
+        OSError: the file cannot be read (missing, a folder, no permission).
+    """
+    name = os.fspath(path)
+    with open(name, encoding="utf-8") as fh:
+        try:
+            data = yaml.load(fh, Loader=_YAML_LOADER)
+        except yaml.YAMLError as exc:
+            problem = _yaml_problem(exc)
+            raise ValueError(f"{what} file {name!r} is not valid YAML: {problem}") from None
+        except UnicodeDecodeError as exc:
+            raise ValueError(f"{what} file {name!r} is not UTF-8 text: {exc.reason}") from None
+    if data is None:
+        if allow_empty:
+            return {}
+        raise ValueError(f"{what} file {name!r} is empty; it must hold a {holds}")
+    if not isinstance(data, dict):
+        raise ValueError(
+            f"{what} file {name!r} must hold a {holds} (key: value lines), "
+            f"got a {type(data).__name__}"
+        )
+    return data
+
+
+def _yaml_problem(exc: yaml.YAMLError) -> str:
+    """``"line L, column C: problem"`` of a YAML error (1-based), or its text."""
+    mark = getattr(exc, "problem_mark", None)
+    problem = getattr(exc, "problem", None) or str(exc).splitlines()[0]
+    if mark is None:
+        return str(problem)
+    return f"line {mark.line + 1}, column {mark.column + 1}: {problem}"
 
 
 def dataclass_from_mapping(cls: type[T], data: Any, name: str, *, item: str = "setting") -> T:

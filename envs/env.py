@@ -93,6 +93,14 @@ class CompassGaitEnv(gym.Env):
     ``"slip"``, ``"stuck"`` or ``"invalid"``; see :mod:`envs.physics`). Truncation: the time
     limit of the registered id (``max_episode_steps``, applied by ``gym.make``).
 
+    ``"invalid"`` means the simulation blew up (a non-finite state, or angles or rates beyond
+    physical bounds: :mod:`envs.physics.kernel`). The walker is then put back to its last valid
+    state (the start of the RK4 substep that diverged), and the observation, reward, info and
+    rendering of that step are those of this state: always finite and within the observation
+    space, the reward with the failure penalty. Absurd settings and start states that would
+    blow up are rejected up front (:class:`envs.physics.RobotParams` bounds, the reset option
+    ``"state"`` bounded by ``RobotParams.max_rate``).
+
     ## Info
 
     Every ``reset`` and ``step`` returns ``state`` (true ``[q1, q2, q1dot, q2dot]``),

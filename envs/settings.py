@@ -21,12 +21,10 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-import yaml
-
 from configs import CONFIG_DIR
 
-from .config_util import dataclass_from_mapping
-from .physics.params import RobotParams, as_params
+from .config_util import dataclass_from_mapping, read_yaml_mapping
+from .physics.params import MAX_HIP_TORQUE, RobotParams, as_params
 from .physics.simulator import SimConfig
 from .sensors import SensorConfig
 from .task import InitialState, RewardConfig, TerrainSource
@@ -55,11 +53,6 @@ SETTING_KEYS = (
 SECTION_KEYS = ("sensors", "reward", "initial_state", "simulator")
 #: the two forms of the actuator limit: setting one drops the other
 _LIMIT_FORMS = {"u_max": "torque_limit", "torque_limit": "u_max"}
-
-try:  # libyaml's parser when PyYAML has it: the same mappings, several times faster
-    _YAML_LOADER: type = yaml.CSafeLoader
-except AttributeError:
-    _YAML_LOADER = yaml.SafeLoader
 
 
 @dataclass(frozen=True)
@@ -147,8 +140,7 @@ def _load(config: Any, *, allow_base_names: bool, seen: tuple[str, ...]) -> dict
             path = ENV_CONFIG_DIR / f"{config}.yaml"
         if not path.is_file():
             raise ValueError(f"env config file {str(path)!r} does not exist")
-        with open(path) as fh:
-            data = yaml.load(fh, Loader=_YAML_LOADER) or {}
+        data = read_yaml_mapping(path, "env config")
     if not isinstance(data, dict):
         raise ValueError(f"env config must be a mapping, got {type(data).__name__}")
     if BASE_KEY in data:
@@ -191,6 +183,11 @@ def resolve_env_settings(
     if torque_limit is not None:
         if isinstance(torque_limit, bool) or not isinstance(torque_limit, (int, float)):
             raise ValueError(f"torque_limit must be a number of N m, got {torque_limit!r}")
+        if not (math.isfinite(torque_limit) and 0 < torque_limit <= MAX_HIP_TORQUE):
+            raise ValueError(
+                f"torque_limit = {torque_limit!r} out of range; allowed: (0, {MAX_HIP_TORQUE:g}] "
+                "N m (hip torque at |action| = 1)"
+            )
         u_max = torque_limit / robot.input_gain
     if u_max is not None:
         robot = robot.replace(u_max=u_max)

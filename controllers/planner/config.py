@@ -13,10 +13,9 @@ from pathlib import Path
 from typing import Any, ClassVar
 
 import numpy as np
-import yaml
 
 from configs import CONFIG_DIR
-from envs.config_util import dataclass_from_mapping, reject_moved_fields
+from envs.config_util import dataclass_from_mapping, read_yaml_mapping, reject_moved_fields
 from envs.physics.params import MOVED_TO_ROBOT
 
 from .footholds import FootholdRules
@@ -214,8 +213,7 @@ class PlannerConfig:
         path = CONFIG_DIR / "planner" / f"{name}.yaml"
         d: dict[str, Any] = {}
         if path.exists():
-            with open(path) as fh:
-                d = yaml.safe_load(fh) or {}
+            d = read_yaml_mapping(path, "planner config")
         d.update(changes)
         return cls.from_dict(d)
 
@@ -223,8 +221,7 @@ class PlannerConfig:
     def from_yaml(cls, path: str | Path) -> PlannerConfig:
         """Build from the YAML file of settings at ``path`` (unknown keys raise
         ``ValueError``)."""
-        with open(path) as fh:
-            return cls.from_dict(yaml.safe_load(fh) or {})
+        return cls.from_dict(read_yaml_mapping(path, "planner config"))
 
 
 @functools.lru_cache(maxsize=64)

@@ -38,8 +38,16 @@ Rules of the hybrid model (see also the README section "Simulator"):
   **liftoff** (normal component of the stance-foot ground reaction
   :func:`envs.physics.model.stance_reaction` negative; normal of the ground segment under the
   stance foot, the segment to its right on a vertex), **slip** (tangential over normal
-  reaction beyond ``mu``), **invalid** (non-finite state). A failed walker keeps its state at
-  the failure instant and is not advanced again until it is reset.
+  reaction beyond ``mu``). A failed walker keeps its state at the failure instant and is not
+  advanced again until it is reset.
+* **Divergence.** The end state of every RK4 substep is checked before anything else (events
+  included), and so is every post-impact state: a non-finite value, ``|q1|`` or ``|q2|`` above
+  :data:`ANGLE_LIMIT` or a rate ``|q1d|``, ``|q2d|`` above the robot's
+  :attr:`envs.physics.RobotParams.max_rate` (``MAX_TIP_SPEED / l``) means the fixed-step
+  integration has blown up (a stiff hip friction, an absurd torque or start state): the run
+  ends with **invalid**, and the walker is put back to its last valid state, the start of the
+  substep that diverged (time, stance foot, stance leg, work and impact records included), so
+  that what it reports stays finite.
 
 Time is held in float64 seconds; the hip input of the kernels is the hip torque in N m (the
 actuator limit ``u_max`` is the environment's business, not the simulator's); the dynamics take
@@ -56,7 +64,7 @@ import numba
 from numba import njit, prange
 
 from . import model
-from .params import PARM, PL, PRETRACT
+from .params import MAX_TIP_SPEED, PARM, PL, PRETRACT
 from .terrain import terrain_height, terrain_slope
 
 # OpenMP worker threads spin while they wait; on a machine whose cores are busy with other
@@ -88,6 +96,10 @@ N_C = 8
 #: failure codes (index) and names; code 0 means "running"
 FAILURES = ("", "fall", "trip", "liftoff", "slip", "stuck", "invalid")
 OK, FALL, TRIP, LIFTOFF, SLIP, STUCK, INVALID = range(7)
+
+#: largest ``|q1|``, ``|q2|`` [rad] of a valid state: a walker cannot wind its legs round twice
+#: without a foot meeting the ground, so beyond it the integration has diverged
+ANGLE_LIMIT = 4.0 * math.pi
 
 _jit = njit(cache=True, fastmath=False, error_model="numpy")
 
@@ -164,9 +176,21 @@ def _reaction_check(P, cfg, q1, q2, w1, w2, a1, a2, nx, ny):
 
 
 @_jit
+def _diverged(q1, q2, w1, w2, rate_max):
+    """True for a state the integration cannot have reached validly: a non-finite value,
+    ``|q1|`` or ``|q2|`` above :data:`ANGLE_LIMIT` [rad], a rate above ``rate_max`` [rad/s]."""
+    return not (
+        abs(q1) <= ANGLE_LIMIT
+        and abs(q2) <= ANGLE_LIMIT
+        and abs(w1) <= rate_max
+        and abs(w2) <= rate_max
+    )
+
+
+@_jit
 def _state_check(P, cfg, tx, ty, n, q1, q2, w1, w2, xs, ys):
     """Failure code of a state (OK, INVALID or FALL)."""
-    if not (math.isfinite(q1) and math.isfinite(q2) and math.isfinite(w1) and math.isfinite(w2)):
+    if _diverged(q1, q2, w1, w2, MAX_TIP_SPEED / P[PL]):
         return INVALID
     if abs(q2) > cfg[C_Q2MAX]:
         return FALL
@@ -205,13 +229,21 @@ def walker_step(P, cfg, tx, ty, n, x, f, tau, dt, ev, out):
     k1a, k1b = model.accelerations(P, q1, q2, w1, w2, u)
     c0, _ = _clearance(P, tx, ty, n, q1, q2, xs, ys, 0.0)
     r0, _ = _clearance(P, tx, ty, n, q1, q2, xs, ys, retract)
+    rate_max = MAX_TIP_SPEED / l
     status = OK
     t_fail = t0
     for k in range(nsub):
         off = k * h  # time offset of the start of the current segment
         seg = h  # remaining length of this substep
+        # the last valid state, restored if this substep diverges
+        v_q1, v_q2, v_w1, v_w2, v_xs, v_ys, v_armed = q1, q2, w1, w2, xs, ys, armed
+        v_leg, v_nimp = f[F_LEG], f[F_NIMP]
+        v_wnet, v_wpos, v_wabs = out[O_WNET], out[O_WPOS], out[O_WABS]
         while True:
             r = model.swing_rk4(P, q1, q2, w1, w2, u, seg, k1a, k1b)
+            if _diverged(r[0], r[1], r[2], r[3], rate_max):
+                status = INVALID
+                break
             c1, fx1 = _clearance(P, tx, ty, n, r[0], r[1], xs, ys, 0.0)
             r1 = 1.0
             if not armed:
@@ -318,6 +350,11 @@ def walker_step(P, cfg, tx, ty, n, x, f, tau, dt, ev, out):
             if not armed and c1 > 0.0 and fx1 - xs >= arm:
                 armed = True
             break
+        if status == INVALID:
+            q1, q2, w1, w2, xs, ys, armed = v_q1, v_q2, v_w1, v_w2, v_xs, v_ys, v_armed
+            f[F_LEG], f[F_NIMP] = v_leg, v_nimp
+            out[O_WNET], out[O_WPOS], out[O_WABS] = v_wnet, v_wpos, v_wabs
+            t_fail = t0 + k * h
         if status != OK:
             break
     x[X_Q1], x[X_Q2], x[X_Q1D], x[X_Q2D] = q1, q2, w1, w2

@@ -12,11 +12,10 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
-import yaml
 
 from configs import CONFIG_DIR
 
-from ..config_util import dataclass_from_mapping
+from ..config_util import dataclass_from_mapping, read_yaml_mapping
 
 # Layout of the flat parameter vector consumed by the compiled model kernels (envs.physics.model).
 P1, P2, P3, P4, P5, P6, P7, P8 = range(8)  # coefficients p1 .. p8 (RobotParams.coefficients)
@@ -34,6 +33,24 @@ PUMAX = 18  # input limit [input units]
 PRETRACT = 19  # swing-foot retraction, fraction of l
 PARM = 20  # arming distance of the swing foot, fraction of l
 N_PARAMS = 21
+
+# Physically meaningful ranges (upper bounds) of the parameters: far beyond any compass-gait
+# robot, they keep absurd values (1e300 kg, a 1e100 N m motor) out of the fixed-step integrator.
+MAX_MASS = 1e3  # m, mH, |mHg| [kg]
+MAX_LENGTH = 10.0  # l [m]
+MAX_INERTIA = 1e3  # Ic [kg m^2]
+MAX_GRAVITY = 100.0  # g [m/s^2]
+MAX_CURRENT_GAIN = 1e3  # kI [A per input unit]
+MAX_TORQUE_CONSTANT = 1e3  # ktau [N m/A]
+MAX_HIP_TORQUE = 1e4  # the actuator's torque limit kI ktau u_max, and Fc [N m]
+#: fastest leg-tip speed of a valid state [m/s]: the simulator's rate bound is ``MAX_TIP_SPEED /
+#: l`` (:attr:`RobotParams.max_rate`); a faster state has diverged
+MAX_TIP_SPEED = 100.0
+#: the simulator's default RK4 substep [s] (:class:`envs.physics.SimConfig`)
+DEFAULT_SUBSTEP = 2.5e-3
+#: ``h * lambda`` kept by the viscous hip friction's decay rate ``lambda`` [1/s] over an RK4
+#: substep ``h`` [s]: a margin below RK4's stability limit 2.785 on the negative real axis
+RK4_DECAY_LIMIT = 2.5
 
 #: the error for a setting that moved to :class:`RobotParams` (``key``: the field), e.g. the
 #: swing-foot geometry that the simulator and planner settings held
@@ -59,9 +76,11 @@ class RobotParams:
         kI: current per unit input [A], > 0.
         ktau: motor torque constant [N m/A], > 0.
         Fc: hip Coulomb friction [N m], >= 0.
-        Fv: hip viscous friction [N m s/rad], >= 0.
+        Fv: hip viscous friction [N m s/rad], >= 0, at most
+            :meth:`viscous_friction_limit` of the default 2.5 ms substep (the explicit RK4
+            substep stays stable; a simulator with a longer substep checks its own limit).
         u_max: actuator limit on the input [input units], > 0; hip torque is
-            ``input_gain * u`` with ``input_gain = kI * ktau``.
+            ``input_gain * u`` with ``input_gain = kI * ktau``, at most ``MAX_HIP_TORQUE``.
         retract: swing-foot retraction: right after lift-off the swing leg is shortened by
             ``retract * l`` [fraction of l], in [0, 0.5].
         arm_distance: the full-length swing foot is armed for touchdown once it is
@@ -71,6 +90,10 @@ class RobotParams:
 
     The simulator, the gait planner and the state estimator all read ``retract`` and
     ``arm_distance`` from here (the retractable-foot rule of :mod:`envs.physics.kernel`).
+
+    Upper bounds (the ``MAX_*`` constants of this module): masses 1e3 kg, ``l`` 10 m, ``Ic``
+    1e3 kg m^2, ``g`` 100 m/s^2, ``kI`` 1e3 A, ``ktau`` 1e3 N m/A, ``Fc`` and the hip torque
+    limit ``kI ktau u_max`` 1e4 N m.
     """
 
     m: float
@@ -99,23 +122,37 @@ class RobotParams:
             if not math.isfinite(float(v)):
                 raise ValueError(f"RobotParams.{f.name} must be finite, got {v!r}")
             object.__setattr__(self, f.name, float(v))
-        _require(self.l > 0, "l", self.l, "> 0 m (leg length)")
-        _require(self.m > 0, "m", self.m, "> 0 kg (leg mass)")
-        _require(self.mH >= 0, "mH", self.mH, ">= 0 kg (inertial hip mass)")
-        _require(0 <= self.lc <= self.l, "lc", self.lc, f"[0, l] = [0, {self.l}] m (on the leg)")
-        _require(self.Ic >= 0, "Ic", self.Ic, ">= 0 kg m^2")
-        _require(self.g > 0, "g", self.g, "> 0 m/s^2")
+        _require(0 < self.l <= MAX_LENGTH, "l", self.l, f"(0, {MAX_LENGTH:g}] m (leg length)")
+        _require(0 < self.m <= MAX_MASS, "m", self.m, f"(0, {MAX_MASS:g}] kg (leg mass)")
         _require(
-            2 * self.m + self.mHg > 0,
+            0 <= self.mH <= MAX_MASS, "mH", self.mH, f"[0, {MAX_MASS:g}] kg (inertial hip mass)"
+        )
+        _require(0 <= self.lc <= self.l, "lc", self.lc, f"[0, l] = [0, {self.l}] m (on the leg)")
+        _require(0 <= self.Ic <= MAX_INERTIA, "Ic", self.Ic, f"[0, {MAX_INERTIA:g}] kg m^2")
+        _require(0 < self.g <= MAX_GRAVITY, "g", self.g, f"(0, {MAX_GRAVITY:g}] m/s^2")
+        _require(
+            2 * self.m + self.mHg > 0 and self.mHg <= MAX_MASS,
             "mHg",
             self.mHg,
-            f"> -2 m = {-2 * self.m} kg (total gravitational mass must be positive)",
+            f"(-2 m, {MAX_MASS:g}] = ({-2 * self.m}, {MAX_MASS:g}] kg (total gravitational mass "
+            "must be positive)",
         )
-        _require(self.kI > 0, "kI", self.kI, "> 0 A")
-        _require(self.ktau > 0, "ktau", self.ktau, "> 0 N m/A")
-        _require(self.Fc >= 0, "Fc", self.Fc, ">= 0 N m")
-        _require(self.Fv >= 0, "Fv", self.Fv, ">= 0 N m s/rad")
-        _require(self.u_max > 0, "u_max", self.u_max, "> 0 input units")
+        _require(0 < self.kI <= MAX_CURRENT_GAIN, "kI", self.kI, f"(0, {MAX_CURRENT_GAIN:g}] A")
+        _require(
+            0 < self.ktau <= MAX_TORQUE_CONSTANT,
+            "ktau",
+            self.ktau,
+            f"(0, {MAX_TORQUE_CONSTANT:g}] N m/A",
+        )
+        _require(0 <= self.Fc <= MAX_HIP_TORQUE, "Fc", self.Fc, f"[0, {MAX_HIP_TORQUE:g}] N m")
+        u_top = MAX_HIP_TORQUE / self.input_gain
+        _require(
+            0 < self.u_max <= u_top,
+            "u_max",
+            self.u_max,
+            f"(0, {u_top:.6g}] input units (a hip torque limit kI * ktau * u_max of at most "
+            f"{MAX_HIP_TORQUE:g} N m)",
+        )
         _require(0 <= self.retract <= 0.5, "retract", self.retract, "[0, 0.5] (fraction of l)")
         _require(
             0 <= self.arm_distance <= 2, "arm_distance", self.arm_distance, "[0, 2] (fraction of l)"
@@ -123,6 +160,14 @@ class RobotParams:
         # Positive definiteness of M for all q1: M11 = p1 > 0 and det(M) > 0.
         p1 = (self.l - self.lc) ** 2 * self.m + self.Ic
         _require(p1 > 0, "Ic", self.Ic, "> 0 when lc == l (swing-leg inertia about the hip is 0)")
+        fv_top = self.viscous_friction_limit(DEFAULT_SUBSTEP)
+        _require(
+            0 <= self.Fv <= fv_top,
+            "Fv",
+            self.Fv,
+            f"[0, {fv_top:.4g}] N m s/rad (stiffer hip friction makes the explicit RK4 substep "
+            f"of {DEFAULT_SUBSTEP * 1e3:g} ms unstable for this robot's leg inertia)",
+        )
 
     # ------------------------------------------------------------------ derived quantities
     @property
@@ -135,6 +180,27 @@ class RobotParams:
     def tau_max(self) -> float:
         """Largest hip torque the actuator can produce, ``input_gain * u_max`` [N m]."""
         return self.input_gain * self.u_max
+
+    @property
+    def max_rate(self) -> float:
+        """Fastest joint rate of a valid state, ``MAX_TIP_SPEED / l`` [rad/s] (a leg tip at
+        100 m/s): start states must stay within it, and a faster simulated state has diverged
+        (``"invalid"``)."""
+        return MAX_TIP_SPEED / self.l
+
+    def viscous_friction_limit(self, substep: float) -> float:
+        """Largest hip viscous friction ``Fv`` [N m s/rad] that an explicit RK4 substep of
+        ``substep`` [s] integrates stably.
+
+        The friction makes the hip rate decay at ``Fv (M^-1)_11`` [1/s]; the bound keeps
+        ``substep`` times the fastest such rate (over all ``q1``) at :data:`RK4_DECAY_LIMIT`.
+        """
+        c = self.coefficients()
+        p1, p2, p3 = c["p1"], c["p2"], c["p3"]
+        cos_q1 = np.linspace(-1.0, 1.0, 2001)
+        det = p1 * (p1 + p3) - (cos_q1 * p2) ** 2
+        inv11 = float(np.max((p3 + 2.0 * p1 - 2.0 * cos_q1 * p2) / det))
+        return RK4_DECAY_LIMIT / (substep * inv11)
 
     @property
     def total_mass(self) -> float:
@@ -182,8 +248,7 @@ class RobotParams:
     @classmethod
     def from_yaml(cls, path: str | Path) -> RobotParams:
         """Load from the YAML file at ``path`` (the fields, SI units)."""
-        with open(path) as fh:
-            return cls.from_dict(yaml.safe_load(fh))
+        return cls.from_dict(read_yaml_mapping(path, "robot", allow_empty=False))
 
     @classmethod
     def from_preset(cls, name: str) -> RobotParams:

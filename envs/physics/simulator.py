@@ -55,7 +55,7 @@ from .kernel import (
     step_parallel,
     step_serial,
 )
-from .params import MOVED_TO_ROBOT, N_PARAMS, RobotParams, as_params
+from .params import DEFAULT_SUBSTEP, MOVED_TO_ROBOT, N_PARAMS, RobotParams, as_params
 from .terrain import Terrain, as_terrain
 
 
@@ -64,8 +64,10 @@ class SimConfig:
     """Simulator settings.
 
     Attributes:
-        substep: largest RK4 substep [s], > 0; each control period ``dt`` is split into
-            ``ceil(dt / substep)`` equal substeps.
+        substep: largest RK4 substep [s], in (0, 0.1]; each control period ``dt`` is split
+            into ``ceil(dt / substep)`` equal substeps. A substep longer than the default
+            2.5 ms lowers the largest hip viscous friction the simulator accepts
+            (:meth:`RobotParams.viscous_friction_limit`).
         fall_height: hip height above the ground below which the walker has fallen, fraction
             of ``l``, in [0, 1).
         q2_limit: largest ``|q2|`` [rad] before the walker has fallen, in (0, pi/2].
@@ -83,7 +85,7 @@ class SimConfig:
         key: MOVED_TO_ROBOT.format(key=key) for key in ("retract", "arm_distance")
     }
 
-    substep: float = 2.5e-3
+    substep: float = DEFAULT_SUBSTEP
     fall_height: float = 0.5
     q2_limit: float = 1.2
     mu: float = 1.0
@@ -256,6 +258,14 @@ class Simulator:
             plist = [as_params(p) for p in params]
         else:
             plist = [as_params(params)] * len(idx)
+        h = self.config.substep
+        for p in plist:
+            if p.Fv > 0.0 and p.Fv > p.viscous_friction_limit(h):
+                raise ValueError(
+                    f"RobotParams.Fv = {p.Fv!r} N m s/rad is too stiff for the RK4 substep "
+                    f"SimConfig.substep = {h!r} s; allowed: [0, {p.viscous_friction_limit(h):.4g}] "
+                    "N m s/rad (or a shorter substep)"
+                )
         for i, p in zip(idx, plist):
             self.params[i] = p
             self._P[i] = p.vector()
@@ -319,8 +329,9 @@ class Simulator:
             t: start time [s].
 
         Raises:
-            ValueError: non-finite or out-of-range states (``|q2| > q2_limit``, hip below
-                ``fall_height * l``, retracted swing foot below the ground, foot off the ground).
+            ValueError: non-finite or out-of-range states (``|q1| > pi``, ``|q2| > q2_limit``,
+                a rate above :attr:`RobotParams.max_rate`, hip below ``fall_height * l``,
+                retracted swing foot below the ground, foot off the ground).
         """
         idx = self._select(index)
         m = idx.size
@@ -344,8 +355,16 @@ class Simulator:
                     )
             p = self.params[i]
             q1, q2 = q[j]
+            if abs(q1) > math.pi:
+                raise ValueError(f"q0[0] = {q1} rad out of range; allowed: |q1| <= pi")
             if abs(q2) > cfg.q2_limit:
                 raise ValueError(f"q0[1] = {q2} out of range; allowed |q2| <= {cfg.q2_limit}")
+            if max(abs(qd[j, 0]), abs(qd[j, 1])) > p.max_rate:
+                raise ValueError(
+                    f"qd0 = ({float(qd[j, 0])!r}, {float(qd[j, 1])!r}) rad/s out of range; "
+                    f"allowed: |q1d|, |q2d| <= {p.max_rate:.4g} rad/s (RobotParams.max_rate, a "
+                    "leg tip at 100 m/s)"
+                )
             hx, hy = model.hip_position(self._P[i], q1, q2, fx, fy)
             if hy - ter.height(hx) < cfg.fall_height * p.l:
                 raise ValueError(

@@ -39,6 +39,8 @@ from numba import njit
 
 from configs import CONFIG_DIR
 
+from ..config_util import read_yaml_mapping
+
 KINDS = ("flat", "slope", "stairs", "blocks", "piecewise", "points")
 #: kinds drawn from a ``seed``: a spec of one of them without a seed is a generator of courses
 SEEDED_KINDS = ("blocks", "piecewise")
@@ -47,6 +49,10 @@ SEEDED_KINDS = ("blocks", "piecewise")
 NAMED_KINDS = ("flat", "slope", "blocks", "piecewise")
 #: the courses shipped with the project: ``NAME.yaml`` spec files
 TERRAIN_CONFIG_DIR = CONFIG_DIR / "terrains"
+#: most vertices of one course (the simulator holds every walker's course in one padded array)
+MAX_VERTICES = 200_000
+#: longest random course (``length`` of blocks and piecewise ground) [m]
+MAX_COURSE_LENGTH = 1e4
 _YAML_SUFFIXES = (".yaml", ".yml")
 
 
@@ -154,6 +160,8 @@ class Terrain:
         y = np.ascontiguousarray(ys, dtype=np.float64)
         if x.ndim != 1 or x.shape != y.shape or x.size < 1:
             raise ValueError("terrain points: xs and ys must be 1-D arrays of the same length >= 1")
+        if x.size > MAX_VERTICES:
+            raise ValueError(f"terrain points: {x.size} vertices; allowed: at most {MAX_VERTICES}")
         if not (np.all(np.isfinite(x)) and np.all(np.isfinite(y))):
             raise ValueError("terrain points must be finite")
         if np.any(np.diff(x) < 0):
@@ -196,6 +204,7 @@ class Terrain:
             rises: height change [m] at each riser (negative for a step down).
             height: ground height [m] before the first riser.
         """
+        _count("edges", edges, MAX_VERTICES // 2 - 1)
         e = [_finite("edges", v) for v in edges]
         r = [_finite("rises", v) for v in rises]
         if len(e) != len(r):
@@ -213,8 +222,13 @@ class Terrain:
     ) -> Terrain:
         """``count`` equal stairs of tread ``width`` [m] and ``rise`` [m], the first riser at
         ``start`` [m], on ground of ``height`` [m] before it."""
-        if int(count) != count or count < 0:
-            raise ValueError(f"terrain field 'count' = {count!r}; allowed: integer >= 0")
+        top = MAX_VERTICES // 2 - 1
+        try:
+            integral = int(count) == count
+        except (TypeError, ValueError, OverflowError):
+            integral = False
+        if isinstance(count, bool) or not integral or not 0 <= count <= top:
+            raise ValueError(f"terrain field 'count' = {count!r}; allowed: integer in [0, {top}]")
         w = _finite("width", width)
         if w <= 0:
             raise ValueError(f"terrain field 'width' = {w}; allowed: > 0 m")
@@ -233,16 +247,14 @@ class Terrain:
         """Random blocks: flat ground up to ``start`` [m], then blocks of widths drawn from
         ``width_range`` [m] whose height changes by a step drawn from ``height_range`` [m] at
         each border, over ``length`` [m]; flat after. Same seed, same terrain."""
-        st, ln = _finite("start", start), _finite("length", length)
-        if ln < 0:
-            raise ValueError(f"terrain field 'length' = {ln}; allowed: >= 0 m")
+        st, ln = _finite("start", start), _length(length)
         wr = _range("width_range", width_range)
         if wr[0] <= 0:
             raise ValueError(f"terrain field 'width_range' = {width_range!r}; allowed: low > 0 m")
         hr = _range("height_range", height_range)
-        rng = np.random.default_rng(_seed(seed))
         # all draws at once (a course is built at every reset of the rough envs)
-        n = int(math.ceil(ln / wr[0])) + 1
+        n = _pieces("blocks", ln, "width_range", wr[0], 2)
+        rng = np.random.default_rng(_seed(seed))
         widths = rng.uniform(wr[0], wr[1], n)
         rises = rng.uniform(hr[0], hr[1], n)
         edges = st + np.concatenate(([0.0], np.cumsum(widths[:-1])))
@@ -277,17 +289,15 @@ class Terrain:
         """Random piecewise-linear ground: flat up to ``start`` [m], then segments of lengths
         drawn from ``segment_range`` [m] with slopes (dh/dx) from ``slope_range`` over ``length``
         [m]; flat after. Same ``seed``, same terrain."""
-        st, ln = _finite("start", start), _finite("length", length)
-        if ln < 0:
-            raise ValueError(f"terrain field 'length' = {ln}; allowed: >= 0 m")
+        st, ln = _finite("start", start), _length(length)
         sr = _range("segment_range", segment_range)
         if sr[0] <= 0:
             raise ValueError(f"terrain field 'segment_range' = {segment_range!r}; allowed: low > 0")
         kr = _range("slope_range", slope_range)
         if max(abs(kr[0]), abs(kr[1])) >= 1.0:
             raise ValueError(f"terrain field 'slope_range' = {slope_range!r}; allowed: |slope| < 1")
+        n = _pieces("piecewise", ln, "segment_range", sr[0], 1)
         rng = np.random.default_rng(_seed(seed))
-        n = int(math.ceil(ln / sr[0])) + 1
         dx = rng.uniform(sr[0], sr[1], n)
         k = rng.uniform(kr[0], kr[1], n)
         x = st + np.cumsum(dx)
@@ -315,7 +325,8 @@ class Terrain:
 
     # ------------------------------------------------------------------ (de)serialisation
     def to_dict(self) -> dict[str, Any]:
-        """Plain-dict spec; :meth:`from_dict` rebuilds this terrain exactly."""
+        """Plain-dict spec; :meth:`from_dict` rebuilds this terrain exactly (a spec given with
+        its own ``xs``, ``ys`` keeps them)."""
         d = dict(self.spec)
         if d["kind"] in ("blocks", "piecewise"):
             # random courses also carry their vertices, so a replay never depends on the RNG
@@ -348,8 +359,12 @@ class Terrain:
             t = builders[kind](**d)
         except TypeError as exc:
             raise ValueError(f"bad fields for terrain kind {kind!r}: {exc}") from None
-        if xs is not None:
+        if xs is not None or ys is not None:
+            if xs is None or ys is None:
+                raise ValueError(f"terrain kind {kind!r}: give both 'xs' and 'ys', or neither")
             t = cls(xs, ys, t.spec)
+            # the polyline replaces the kind's: the spec keeps it, so to_dict round-trips
+            t.spec = {**t.spec, "xs": t.xs.tolist(), "ys": t.ys.tolist()}
         return t
 
     def to_yaml(self, path: str | Path) -> None:
@@ -491,11 +506,40 @@ def as_terrain(spec: Terrain | dict[str, Any] | str | os.PathLike) -> Terrain:
 
 def _read_spec(path: str | os.PathLike) -> dict[str, Any]:
     """The spec dict in the YAML file ``path``."""
-    with open(path) as fh:
-        spec = yaml.safe_load(fh)
-    if not isinstance(spec, dict):
-        raise ValueError(f"terrain file {os.fspath(path)!r} must hold a spec mapping")
-    return dict(spec)
+    return read_yaml_mapping(path, "terrain", allow_empty=False, holds="spec mapping")
+
+
+def _length(value: Any) -> float:
+    """The ``length`` [m] of a random course, checked against :data:`MAX_COURSE_LENGTH`."""
+    ln = _finite("length", value)
+    if not 0 <= ln <= MAX_COURSE_LENGTH:
+        raise ValueError(
+            f"terrain field 'length' = {ln!r} out of range; allowed: [0, {MAX_COURSE_LENGTH:g}] m"
+        )
+    return ln
+
+
+def _pieces(kind: str, length: float, field: str, shortest: float, per_piece: int) -> int:
+    """Number of random pieces drawn for a course of ``length`` [m] whose pieces are at least
+    ``shortest`` [m] long, checked so that the course stays within :data:`MAX_VERTICES`."""
+    pieces = length / shortest + 1.0
+    if per_piece * pieces + 2 > MAX_VERTICES:
+        raise ValueError(
+            f"terrain kind {kind!r}: 'length' = {length:g} m over pieces of at least "
+            f"{field}[0] = {shortest:g} m makes up to {per_piece * pieces + 2:.4g} vertices; "
+            f"allowed: at most {MAX_VERTICES} (shorten 'length' or lengthen '{field}')"
+        )
+    return int(math.ceil(length / shortest)) + 1
+
+
+def _count(name: str, values: Any, top: int) -> None:
+    """Reject a sequence field with more than ``top`` entries (before converting them)."""
+    try:
+        size = len(values)
+    except TypeError:
+        raise ValueError(f"terrain field {name!r} must be a list of numbers") from None
+    if size > top:
+        raise ValueError(f"terrain field {name!r} has {size} entries; allowed: at most {top}")
 
 
 def _seed(seed: Any) -> int:
