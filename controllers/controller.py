@@ -33,7 +33,13 @@ from typing import Any
 
 import numpy as np
 
-from envs.config_util import dataclass_from_mapping, read_yaml_mapping
+from envs.config_util import (
+    dataclass_from_mapping,
+    finite_pair,
+    integer_setting,
+    read_yaml_mapping,
+    real_setting,
+)
 from envs.physics import model
 from envs.physics.params import RobotParams, as_params
 from envs.physics.simulator import SimConfig, Simulator
@@ -90,23 +96,28 @@ class ControllerConfig:
 
     def __post_init__(self) -> None:
         for name in ("horizon", "grid", "plan_steps"):
-            v = getattr(self, name)
             lo = {"horizon": 1, "grid": 4, "plan_steps": 2}[name]
-            if isinstance(v, bool) or int(v) != v or v < lo:
-                raise ValueError(f"ControllerConfig.{name} = {v!r}; allowed: integer >= {lo}")
-            object.__setattr__(self, name, int(v))
-        for name in ("Q", "Qj"):
-            v = tuple(float(x) for x in getattr(self, name))
-            if len(v) != 3 or not all(math.isfinite(x) and x > 0 for x in v):
-                raise ValueError(f"ControllerConfig.{name} = {v!r}; allowed: three numbers > 0")
+            v = integer_setting(f"ControllerConfig.{name}", getattr(self, name), lo)
             object.__setattr__(self, name, v)
-        if not (math.isfinite(float(self.R)) and float(self.R) > 0):
-            raise ValueError(f"ControllerConfig.R = {self.R!r}; allowed: > 0")
-        object.__setattr__(self, "R", float(self.R))
-        if not (math.isfinite(float(self.late_blend)) and float(self.late_blend) >= 0):
+        for name in ("Q", "Qj"):
+            raw = getattr(self, name)
+            try:
+                v = tuple(real_setting(name, x) for x in raw)
+            except (TypeError, ValueError):
+                v = ()
+            if len(v) != 3 or not all(x > 0 for x in v):
+                raise ValueError(f"ControllerConfig.{name} = {raw!r}; allowed: three numbers > 0")
+            object.__setattr__(self, name, v)
+        R = real_setting("ControllerConfig.R", self.R, "a finite number > 0")
+        if not R > 0:
+            raise ValueError(f"ControllerConfig.R = {self.R!r}; allowed: a finite number > 0")
+        object.__setattr__(self, "R", R)
+        blend = real_setting("ControllerConfig.late_blend", self.late_blend, ">= 0 rad")
+        if not blend >= 0:
             raise ValueError(f"ControllerConfig.late_blend = {self.late_blend!r}; allowed: >= 0")
-        object.__setattr__(self, "late_blend", float(self.late_blend))
-        if not (0.0 <= float(self.margin) <= 0.5):
+        object.__setattr__(self, "late_blend", blend)
+        margin = real_setting("ControllerConfig.margin", self.margin, "[0, 0.5]")
+        if not (0.0 <= margin <= 0.5):
             raise ValueError(f"ControllerConfig.margin = {self.margin!r}; allowed: [0, 0.5]")
         if not isinstance(self.replan, (bool, np.bool_)):
             raise ValueError(f"ControllerConfig.replan = {self.replan!r}; allowed: True or False")
@@ -241,10 +252,11 @@ class TransverseController:
             self.terrain = as_terrain(terrain)
         if stance_foot is None:
             stance_foot = (0.0, float(self.terrain.height(0.0)))
+        stance = finite_pair("stance_foot", stance_foot, "m")
         self.records = []
         self.plan = None
         self.solution = None
-        self._stance = (float(stance_foot[0]), float(stance_foot[1]))
+        self._stance = stance
         self._start_step(np.asarray(q, float), np.asarray(qd, float), t, first=True)
 
     def on_impact(
@@ -253,7 +265,7 @@ class TransverseController:
         """A touchdown happened: ``(q, qd)`` is the post-impact state [rad, rad/s],
         ``stance_foot`` the new stance-foot position [m], ``t`` the impact time [s] (NaN if
         unknown). Replans (or advances the fixed plan) and re-solves."""
-        self._stance = (float(stance_foot[0]), float(stance_foot[1]))
+        self._stance = finite_pair("stance_foot", stance_foot, "m")
         self._start_step(np.asarray(q, float), np.asarray(qd, float), t, first=False)
 
     def replan(self, q: np.ndarray, qd: np.ndarray) -> None:

@@ -8,6 +8,10 @@ turn a constructor ``TypeError`` into a ``ValueError``. A setting that moved to 
 is listed in the dataclass's ``MOVED_FIELDS`` (name -> where it is set now); giving it, as a
 mapping key or a keyword argument (:func:`reject_moved_fields`), fails naming its replacement.
 
+:func:`integer_setting`, :func:`real_setting` and :func:`finite_pair` check the counts, numbers
+and points given as arguments (``horizon=2.7`` or a NaN foot position are errors, not silently
+truncated or passed on).
+
 :func:`read_yaml_mapping` is the one reader of the YAML files behind these settings (env, robot,
 terrain, planner and controller files): a syntax error or a document that is not a mapping is a
 ``ValueError`` naming the file and what is wrong.
@@ -15,11 +19,13 @@ terrain, planner and controller files): a syntax error or a document that is not
 
 from __future__ import annotations
 
+import math
 import os
 from collections.abc import Mapping
 from dataclasses import MISSING, fields, is_dataclass
 from typing import Any, TypeVar
 
+import numpy as np
 import yaml
 
 T = TypeVar("T")
@@ -141,3 +147,47 @@ def reject_moved_fields(cls: type, keys: Any) -> None:
     for key in keys:
         if key in moved:
             raise ValueError(f"{cls.__name__}.{key} moved: {moved[key]}")
+
+
+def integer_setting(name: str, value: Any, low: int, high: int | None = None) -> int:
+    """``value`` as an int: an integer (or an integral float such as ``3.0``) in
+    ``[low, high]``.
+
+    Raises:
+        ValueError: ``"{name} = {value!r}; allowed: integer >= low"`` (or ``in [low, high]``)
+            for anything else: ``2.7``, NaN, a string, None, a bool.
+    """
+    allowed = f"integer >= {low}" if high is None else f"integer in [{low}, {high}]"
+    ok = not isinstance(value, bool) and isinstance(value, (int, float, np.integer, np.floating))
+    if ok and math.isfinite(value) and int(value) == value:
+        v = int(value)
+        if v >= low and (high is None or v <= high):
+            return v
+    raise ValueError(f"{name} = {value!r}; allowed: {allowed}")
+
+
+def real_setting(name: str, value: Any, allowed: str = "a finite number") -> float:
+    """``value`` as a finite float (a Python or numpy real number, not a bool).
+
+    Raises:
+        ValueError: ``"{name} = {value!r}; allowed: {allowed}"`` otherwise.
+    """
+    ok = not isinstance(value, bool) and isinstance(value, (int, float, np.integer, np.floating))
+    if not (ok and math.isfinite(value)):
+        raise ValueError(f"{name} = {value!r}; allowed: {allowed}")
+    return float(value)
+
+
+def finite_pair(name: str, value: Any, unit: str) -> tuple[float, float]:
+    """``value`` as two finite floats, e.g. a position ``(x, y)`` [m].
+
+    Raises:
+        ValueError: ``"{name} must be two finite numbers [unit], got ..."`` otherwise.
+    """
+    try:
+        a = np.asarray(value, dtype=np.float64)
+    except (TypeError, ValueError):
+        a = None
+    if a is None or a.shape != (2,) or not np.all(np.isfinite(a)):
+        raise ValueError(f"{name} must be two finite numbers [{unit}], got {value!r}")
+    return float(a[0]), float(a[1])

@@ -21,6 +21,8 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
+import numpy as np
+
 from configs import CONFIG_DIR
 
 from .config_util import dataclass_from_mapping, read_yaml_mapping
@@ -206,9 +208,7 @@ def resolve_env_settings(
         sim = dataclass_from_mapping(SimConfig, sim, "simulator")
     elif not isinstance(sim, SimConfig):
         raise ValueError(f"simulator must be a mapping or SimConfig, got {type(sim)}")
-    mes = data.get("max_episode_steps")
-    if mes is not None and (isinstance(mes, bool) or int(mes) != mes or mes < 1):
-        raise ValueError(f"max_episode_steps = {mes!r}; allowed: integer >= 1 or None")
+    mes = check_max_episode_steps(data.get("max_episode_steps"))
     return EnvSettings(
         robot=robot,
         terrain=TerrainSource(data.get("terrain", "flat"), data.get("difficulty", 1.0)),
@@ -218,5 +218,20 @@ def resolve_env_settings(
         reward=dataclass_from_mapping(RewardConfig, data.get("reward") or {}, "reward"),
         initial_state=dataclass_from_mapping(InitialState, data["initial_state"], "initial_state"),
         simulator=sim,
-        max_episode_steps=None if mes is None else int(mes),
+        max_episode_steps=mes,
     )
+
+
+def check_max_episode_steps(value: Any) -> int | None:
+    """The time limit ``value`` [control periods] checked: an integer >= 1 (an integral float
+    such as ``3000.0`` is taken as one) or None.
+
+    Raises:
+        ValueError: anything else (``2.5``, ``0``, ``"3"``, ``True``), naming the setting.
+    """
+    if value is None:
+        return None
+    ok = not isinstance(value, bool) and isinstance(value, (int, float, np.integer, np.floating))
+    if not (ok and math.isfinite(value) and int(value) == value and value >= 1):
+        raise ValueError(f"max_episode_steps = {value!r}; allowed: integer >= 1 or None")
+    return int(value)

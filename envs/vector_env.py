@@ -31,7 +31,7 @@ from .batch import WalkerBatch
 from .physics.simulator import Simulator
 from .physics.terrain import Terrain
 from .rendering import WalkerRenderer
-from .settings import resolve_env_settings
+from .settings import check_max_episode_steps, resolve_env_settings
 
 _MODES = {
     "next_step": AutoresetMode.NEXT_STEP,
@@ -90,13 +90,9 @@ class CompassGaitVectorEnv(VectorEnv):
         settings = resolve_env_settings(config, **kwargs)
         if max_episode_steps is None:
             max_episode_steps = settings.max_episode_steps
-        if max_episode_steps is not None and (
-            isinstance(max_episode_steps, bool) or int(max_episode_steps) < 1
-        ):
-            raise ValueError(f"max_episode_steps = {max_episode_steps!r}; allowed: int >= 1")
         self.num_envs = n = int(num_envs)
         self.settings = settings
-        self.max_episode_steps = None if max_episode_steps is None else int(max_episode_steps)
+        self.max_episode_steps = check_max_episode_steps(max_episode_steps)
         self.autoreset_mode = autoreset_mode
         self._batch = b = WalkerBatch(settings, n, parallel=parallel)
         self.robot = self.params = settings.robot

@@ -9,6 +9,7 @@ from typing import Any, ClassVar
 
 import numpy as np
 
+from envs.config_util import finite_pair, integer_setting
 from envs.physics.params import RobotParams, as_params
 
 from .config import PlannerConfig, PlanningError
@@ -100,7 +101,7 @@ class GaitPlanner:
                 ``(xs, heights)`` [m].
             state: actual post-impact ``(q, qd)`` [rad, rad/s] (``q2d > 0``).
             stance_foot: stance-foot position ``(x, y)`` [m].
-            horizon: number of steps (default ``config.horizon``).
+            horizon: number of steps, an integer >= 1 (default ``config.horizon``).
             previous_plan: the plan made at the previous footstep (warm start). Step problems
                 this planner already solved since the last call without a previous plan (same
                 terrain, start state, footholds and weights, to 1e-10) are reused after one
@@ -109,17 +110,20 @@ class GaitPlanner:
 
         Raises:
             PlanningError: no feasible step (names the step and the violated constraint).
-            ValueError: malformed state.
+            ValueError: a malformed or non-finite state or stance foot, a horizon that is not
+                an integer >= 1.
         """
         t0 = time.perf_counter()
         cfg = self.config
-        H = cfg.horizon if horizon is None else int(horizon)
-        if H < 1:
-            raise ValueError(f"horizon = {horizon!r}; allowed: integer >= 1")
-        q = np.asarray(state[0], dtype=float).reshape(-1)
-        qd = np.asarray(state[1], dtype=float).reshape(-1)
+        H = cfg.horizon if horizon is None else integer_setting("horizon", horizon, 1)
+        try:
+            q = np.asarray(state[0], dtype=float).reshape(-1)
+            qd = np.asarray(state[1], dtype=float).reshape(-1)
+        except (TypeError, ValueError, IndexError, KeyError):
+            q = qd = np.zeros(0)
         if q.shape != (2,) or qd.shape != (2,) or not np.all(np.isfinite(np.r_[q, qd])):
             raise ValueError(f"state must be finite (q, qd) pairs, got {state!r}")
+        stance = finite_pair("stance_foot", stance_foot, "m")
         if not qd[1] > 0:
             raise PlanningError(0, "post-impact theta_dot positive", f"q2d = {qd[1]:.4g} rad/s")
         tmap = TerrainMap.coerce(terrain)
@@ -131,7 +135,6 @@ class GaitPlanner:
             self.params, cfg, tmap, gait, self._solutions, self._chains, H, previous_plan
         )
         start = (float(q[1]), float(q[0]), float(qd[0] / qd[1]), float(qd[1]))
-        stance = (float(stance_foot[0]), float(stance_foot[1]))
         plan = Plan(search.run(start, stance), self.params, cfg)
         plan.solve_time = time.perf_counter() - t0
         return plan

@@ -95,27 +95,61 @@ def actions_to_torques(actions: Any, tau_max: float, out: np.ndarray) -> None:
     the torque limit ``tau_max`` [N m].
 
     Args:
-        actions: ``(n,)`` or ``(n, 1)`` actions (float32 or float64; others are converted).
+        actions: ``(n,)`` or ``(n, 1)`` real actions (float32 or float64; integers, lists and
+            other float types are converted; with ``n == 1`` also one number).
         tau_max: hip torque at ``|action| = 1`` [N m].
         out: ``(n,)`` float64 buffer the torques are written to.
 
     Raises:
-        ValueError: a NaN or infinite action (nothing written) or a shape other than ``(n,)`` or
-            ``(n, 1)``.
+        TypeError: actions that are not real numbers (strings, complex numbers, None, a dict,
+            booleans, ...); nothing written.
+        ValueError: a NaN or infinite action (nothing written) or another shape.
     """
     n = out.size
-    if n == 1 and type(actions) is np.ndarray and actions.shape == (1,):
+    if (
+        n == 1
+        and type(actions) is np.ndarray
+        and actions.shape == (1,)
+        and actions.dtype.kind == "f"
+    ):
         # one env's action: a scalar, without the batch's array checks
         a = float(actions[0])
         if not math.isfinite(a):
             raise ValueError(f"action = {a!r} must be finite (allowed: [-1, 1])")
         out[0] = torque_from_action(a, tau_max)
         return
-    a = actions if type(actions) is np.ndarray else np.asarray(actions)
+    a = actions if type(actions) is np.ndarray else _action_array(actions, n)
+    if a.dtype.kind not in _REAL_KINDS:
+        raise TypeError(_action_rule(n, _described(actions, a)))
     if a.dtype != np.float32 and a.dtype != np.float64:
         a = a.astype(np.float64)
-    if a.size != n or a.ndim > 2:
-        raise ValueError(f"actions must have shape ({n}, 1), got {a.shape}")
+    if a.shape != (n,) and a.shape != (n, 1) and not (n == 1 and a.shape == ()):
+        raise ValueError(_action_rule(n, f"shape {a.shape}"))
     bad = _torques_from_actions(a.reshape(n), float(tau_max), out)
     if bad >= 0:
         raise ValueError(f"action[{bad}] = {a.reshape(n)[bad]!r} must be finite (allowed: [-1, 1])")
+
+
+#: numpy dtype kinds accepted as actions: floats, signed and unsigned integers
+_REAL_KINDS = "fiu"
+
+
+def _action_array(actions: Any, n: int) -> np.ndarray:
+    """``actions`` as an array (a ragged nesting is a shape error)."""
+    try:
+        return np.asarray(actions)
+    except (TypeError, ValueError):
+        raise ValueError(_action_rule(n, f"a {type(actions).__name__} of no array shape")) from None
+
+
+def _described(actions: Any, a: np.ndarray) -> str:
+    """What was given, for the messages: the type of a Python object, an array's dtype."""
+    if type(actions) is np.ndarray or a.dtype.kind not in "OUS":
+        return f"dtype {a.dtype}"
+    return f"a {type(actions).__name__} ({actions!r:.40})"
+
+
+def _action_rule(n: int, got: str) -> str:
+    """The message of a rejected action: the expected shape and dtype, and what was given."""
+    shapes = f"({n},) or ({n}, 1)" + (" or one number" if n == 1 else "")
+    return f"actions must be real numbers (float32 or float64) of shape {shapes}; got {got}"
