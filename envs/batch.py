@@ -26,7 +26,18 @@ from numba import njit, prange
 
 from .physics import model
 from .physics.actuator import actions_to_torques
-from .physics.kernel import FAILURES
+from .physics.kernel import (
+    F_LEG,
+    F_NIMP,
+    F_STATUS,
+    FAILURES,
+    X_Q1,
+    X_Q1D,
+    X_Q2,
+    X_Q2D,
+    X_XS,
+    X_YS,
+)
 from .physics.simulator import Simulator
 from .physics.terrain import Terrain
 from .sensors import (
@@ -53,69 +64,74 @@ RESET_OPTIONS = ("terrain", "state", "stance_leg", "reset_mask")
 
 
 # ---------------------------------------------------------------------------- compiled step
+# The kernels read the simulator's whole state and flag arrays (rows ``X_*``, ``F_*``) and its
+# work array: those are C-contiguous for every batch size, so one compiled version serves the
+# env and the vector env (column views such as ``sim.q`` are contiguous only for one walker).
 @njit(cache=True)
-def _observe_walker(i, mode, refresh, q, qd, foot, leg, tx, ty, tn, settings, offsets, scan,
-                    streams, obs):  # fmt: skip
+def _observe_walker(i, mode, refresh, x, f, tx, ty, tn, settings, offsets, scan, streams, obs):
     if refresh:
-        scan_walker(i, foot[i, 0], foot[i, 1], tx, ty, tn, offsets, scan)
+        scan_walker(i, x[i, X_XS], x[i, X_YS], tx, ty, tn, offsets, scan)
     if mode == OBS_SENSORS:
-        measure_walker(i, q[i, 0], q[i, 1], leg[i], settings, scan, streams, obs)
+        measure_walker(i, x[i, X_Q1], x[i, X_Q2], f[i, F_LEG], settings, scan, streams, obs)
     else:
-        state_walker(i, q[i, 0], q[i, 1], qd[i, 0], qd[i, 1], leg[i], scan,
+        state_walker(i, x[i, X_Q1], x[i, X_Q2], x[i, X_Q1D], x[i, X_Q2D], f[i, F_LEG], scan,
                      settings[K_SCAN_RANGE], obs)  # fmt: skip
 
 
 @njit(cache=True)
-def _post_walker(i, P, q, foot, status, nimp, work, new_fail, weights, hip_x, distance,
-                 step_work, footsteps, reward, terminated):  # fmt: skip
-    hx, _ = model.hip_position(P, q[i, 0], q[i, 1], foot[i, 0], foot[i, 1])
+def _post_walker(i, P, x, f, work, wcol, new_fail, weights, hip_x, distance, step_work,
+                 footsteps, reward, terminated):  # fmt: skip
+    hx, _ = model.hip_position(P, x[i, X_Q1], x[i, X_Q2], x[i, X_XS], x[i, X_YS])
     progress = hx - hip_x[i]
     hip_x[i] = hx
-    w = work[i]
+    w = work[i, wcol]
     distance[i] += progress
     step_work[i] = w
-    footsteps[i] += nimp[i]
+    footsteps[i] += f[i, F_NIMP]
     r = weights[W_PROGRESS] * progress - weights[W_ENERGY] * w
     if new_fail[i]:
         r -= weights[W_FAILURE]
     if not math.isfinite(r):  # never with the simulator's divergence check; kept finite anyway
         r = -weights[W_FAILURE]
     reward[i] = r
-    terminated[i] = status[i] != 0
+    terminated[i] = f[i, F_STATUS] != 0
 
 
 @njit(cache=True)
-def _after_step_serial(mode, P, q, qd, foot, leg, status, nimp, work, new_fail, tx, ty, tn,
-                       weights, settings, offsets, scan, streams, hip_x, distance, step_work,
-                       footsteps, reward, terminated, obs):  # fmt: skip
+def _after_step_serial(mode, P, x, f, work, wcol, new_fail, tx, ty, tn, weights, settings,
+                       offsets, scan, streams, hip_x, distance, step_work, footsteps, reward,
+                       terminated, obs):  # fmt: skip
     """Rewards, counters and observations of every walker after a simulator step."""
-    for i in range(q.shape[0]):
-        _post_walker(i, P, q, foot, status, nimp, work, new_fail, weights, hip_x, distance,
-                     step_work, footsteps, reward, terminated)  # fmt: skip
-        refresh = nimp[i] > 0 or new_fail[i]  # the stance foot moved: rescan the terrain
-        _observe_walker(i, mode, refresh, q, qd, foot, leg, tx, ty, tn, settings, offsets, scan,
-                        streams, obs)  # fmt: skip
+    for i in range(x.shape[0]):
+        _post_walker(i, P, x, f, work, wcol, new_fail, weights, hip_x, distance, step_work,
+                     footsteps, reward, terminated)  # fmt: skip
+        refresh = f[i, F_NIMP] > 0 or new_fail[i]  # the stance foot moved: rescan the terrain
+        _observe_walker(i, mode, refresh, x, f, tx, ty, tn, settings, offsets, scan, streams,
+                        obs)  # fmt: skip
 
 
 @njit(cache=True, parallel=True)
-def _after_step_parallel(mode, P, q, qd, foot, leg, status, nimp, work, new_fail, tx, ty, tn,
-                         weights, settings, offsets, scan, streams, hip_x, distance, step_work,
-                         footsteps, reward, terminated, obs):  # fmt: skip
+def _after_step_parallel(mode, P, x, f, work, wcol, new_fail, tx, ty, tn, weights, settings,
+                         offsets, scan, streams, hip_x, distance, step_work, footsteps, reward,
+                         terminated, obs):  # fmt: skip
     """:func:`_after_step_serial` with the walkers spread over threads (same numbers)."""
-    for i in prange(q.shape[0]):
-        _post_walker(i, P, q, foot, status, nimp, work, new_fail, weights, hip_x, distance,
-                     step_work, footsteps, reward, terminated)  # fmt: skip
-        refresh = nimp[i] > 0 or new_fail[i]
-        _observe_walker(i, mode, refresh, q, qd, foot, leg, tx, ty, tn, settings, offsets, scan,
-                        streams, obs)  # fmt: skip
+    for i in prange(x.shape[0]):
+        _post_walker(i, P, x, f, work, wcol, new_fail, weights, hip_x, distance, step_work,
+                     footsteps, reward, terminated)  # fmt: skip
+        refresh = f[i, F_NIMP] > 0 or new_fail[i]
+        _observe_walker(i, mode, refresh, x, f, tx, ty, tn, settings, offsets, scan, streams,
+                        obs)  # fmt: skip
 
 
 @njit(cache=True)
-def _observe(idx, mode, q, qd, foot, leg, tx, ty, tn, settings, offsets, scan, streams, obs):
+def _observe(idx, mode, x, f, tx, ty, tn, settings, offsets, scan, streams, obs):
     """Observations of walkers ``idx`` after a reset (terrain rescanned)."""
+    # a computed flag (True here), not the literal True: the literal would compile another
+    # version of _observe_walker
+    refresh = idx.size > 0
     for j in range(idx.size):
-        _observe_walker(idx[j], mode, True, q, qd, foot, leg, tx, ty, tn, settings, offsets,
-                        scan, streams, obs)  # fmt: skip
+        _observe_walker(idx[j], mode, refresh, x, f, tx, ty, tn, settings, offsets, scan,
+                        streams, obs)  # fmt: skip
 
 
 # ---------------------------------------------------------------------------- buffers
@@ -134,6 +150,10 @@ class SimulatorViews:
         footholds: ``(n, K, 2)`` new stance-foot positions of the last step's touchdowns [m].
         work: ``(n,)`` the reward's kind of motor work over the last step [J].
         x6: ``(n, 6)`` ``(q1, q2, q1d, q2d, xs, ys)``, one strided view for batched infos.
+        states, flags: the simulator's whole ``(n, 7)`` state and ``(n, 4)`` flag arrays
+            (read-only, C-contiguous: what the compiled kernels read).
+        works: ``(n, 3)`` the motor work of every kind over the last step [J].
+        work_column: the column of ``works`` that is ``work``.
     """
 
     q: np.ndarray
@@ -147,6 +167,10 @@ class SimulatorViews:
     footholds: np.ndarray
     work: np.ndarray
     x6: np.ndarray
+    states: np.ndarray
+    flags: np.ndarray
+    works: np.ndarray
+    work_column: int
 
     @classmethod
     def of(cls, sim: Simulator, work_column: int) -> SimulatorViews:
@@ -165,6 +189,10 @@ class SimulatorViews:
             work=ev.work[:, work_column],
             # the public q, qd and stance_foot views are slices of the simulator's state array
             x6=sim.states[:, :6],
+            states=sim.states,
+            flags=sim.flags,
+            works=ev.work,
+            work_column=int(work_column),
         )
 
 
@@ -336,8 +364,8 @@ class WalkerBatch:
         self.footholds[i] = [(float(v.stance_foot[i, 0]), float(v.stance_foot[i, 1]))]
         tx, ty, tn = self.sim.terrain_arrays
         _observe(
-            np.array([i]), o.mode, v.q, v.qd, v.stance_foot, v.stance_leg, tx, ty, tn,
-            o.settings, o.offsets, o.scan, o.streams, o.fresh,
+            np.array([i]), o.mode, v.states, v.flags, tx, ty, tn, o.settings, o.offsets, o.scan,
+            o.streams, o.fresh,
         )  # fmt: skip
         o.fill(i)
 
@@ -357,10 +385,9 @@ class WalkerBatch:
         self.sim.step(self._torques)
         tx, ty, tn = self.sim.terrain_arrays
         self._after_step(
-            o.mode, self._P, v.q, v.qd, v.stance_foot, v.stance_leg, v.status, v.n_impacts,
-            v.work, v.new_failure, tx, ty, tn, self._weights, o.settings, o.offsets, o.scan,
-            o.streams, e.hip_x, e.distance, e.step_work, e.footsteps, e.reward, e.terminated,
-            o.fresh,
+            o.mode, self._P, v.states, v.flags, v.works, v.work_column, v.new_failure, tx, ty,
+            tn, self._weights, o.settings, o.offsets, o.scan, o.streams, e.hip_x, e.distance,
+            e.step_work, e.footsteps, e.reward, e.terminated, o.fresh,
         )  # fmt: skip
         o.push()
         if self.track_footholds:

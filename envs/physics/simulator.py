@@ -298,6 +298,9 @@ class Simulator:
             self._tx[i, :m] = t.xs
             self._ty[i, :m] = t.ys
             self._tn[i] = m
+        # the kernels get read-only views, like a Terrain's own vertex arrays: one compiled
+        # version of the terrain queries serves both
+        self._terrain = (_read_only(self._tx), _read_only(self._ty), _read_only(self._tn))
 
     def _index(self, i: Any) -> int:
         if isinstance(i, bool) or not isinstance(i, (int, np.integer)):
@@ -372,7 +375,7 @@ class Simulator:
                     f"allowed: >= fall_height * l = {cfg.fall_height * p.l}"
                 )
             armed, r = initial_flags(
-                self._P[i], self._cfg, self._tx[i], self._ty[i], self._tn[i], q1, q2, fx, fy
+                self._P[i], self._cfg, *(a[i] for a in self._terrain), q1, q2, fx, fy
             )
             if not armed and r < -1e-12:
                 raise ValueError(
@@ -426,9 +429,7 @@ class Simulator:
         bad = self._kernel(
             self._P,
             self._cfg,
-            self._tx,
-            self._ty,
-            self._tn,
+            *self._terrain,
             self._x,
             self._f,
             self._tau,
@@ -497,9 +498,9 @@ class Simulator:
     @property
     def terrain_arrays(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Padded terrain vertices ``(tx (N, K), ty (N, K), tn (N,))`` as the kernels see them
-        (``envs.physics.terrain.terrain_height(tx[i], ty[i], tn[i], x)``). :meth:`set_terrain` may
-        reallocate them: fetch them again after it."""
-        return self._tx, self._ty, self._tn
+        (read-only views; ``envs.physics.terrain.terrain_height(tx[i], ty[i], tn[i], x)``).
+        :meth:`set_terrain` may reallocate them: fetch them again after it."""
+        return self._terrain
 
     def failure(self, i: int = 0) -> str | None:
         """Failure reason of walker ``i`` or None while it runs."""
