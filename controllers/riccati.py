@@ -86,7 +86,9 @@ def _solve_segments(A, G, Qw, ds, nsteps, offs, F, Qj_inv, Znodes, node_offs):
             Qi = Qj_inv[j]
             QiFt = Qi @ Fj.T
             Mj = Z + Fj @ QiFt
-            X = np.linalg.solve(Mj, QiFt.T)  # (Z+ + F Qi F')^-1 F Qi
+            # (Z+ + F Qi F')^-1 F Qi; a C-ordered right-hand side, like the other solve's, so
+            # that one compiled solve serves both (the values are the same)
+            X = np.linalg.solve(Mj, np.ascontiguousarray(QiFt.T))
             Z = Qi - QiFt @ X
             Z = 0.5 * (Z + Z.T)
             Z = np.ascontiguousarray(Z)

@@ -250,7 +250,9 @@ class StepModel:
 
     def _foothold(self) -> tuple[float, float]:
         c = self.constraint
-        fx, fy = model.swing_foot_position(self.P, float(c.phi(c.theta_minus)), c.theta_minus, 0, 0)
+        fx, fy = model.swing_foot_position(
+            self.P, float(c.phi(c.theta_minus)), c.theta_minus, 0.0, 0.0
+        )
         return float(fx), float(fy)
 
 
