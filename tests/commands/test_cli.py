@@ -127,6 +127,27 @@ def _cases() -> list[tuple[str, list[str], tuple[str, ...]]]:
             ("{env_config}", "not valid YAML"),
         ),
         (
+            "evaluate-torque-limit-huge",
+            [*ev, "--env", FLAT, "--env-kwargs", "torque_limit=1.0e+100"],
+            ("torque_limit", "allowed: (0, 10000] N m"),
+        ),
+        (
+            "evaluate-robot-stiff-friction",
+            [
+                *ev,
+                "--env",
+                ANY,
+                "--env-kwargs",
+                "robot={{name: x, m: 1, mH: 1, mHg: 1, l: 1, lc: 0.5, Fv: 1.0e+3}}",
+            ],
+            ("RobotParams.Fv", "N m s/rad", "allowed: [0, "),
+        ),
+        (
+            "evaluate-terrain-length-huge",
+            [*ev, "--env", ANY, "--env-kwargs", "terrain={{kind: blocks, length: 1.0e+12}}"],
+            ("'length'", "allowed: [0, 10000] m"),
+        ),
+        (
             "evaluate-stats-beside-model",
             ["evaluate", "--policy", "{model}", "--env", FLAT],
             ("{stats}", "VecNormalize statistics"),
