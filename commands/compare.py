@@ -31,7 +31,10 @@ def configure(parser: argparse.ArgumentParser) -> None:
         "--terrains",
         nargs="+",
         choices=[x.name for x in SETTINGS],
-        help="only these terrain settings (default: all)",
+        metavar="TERRAIN",
+        help="only these terrain settings, of "
+        + ", ".join(x.name for x in SETTINGS)
+        + " (default: all)",
     )
     parser.add_argument(
         "--log-dir",
