@@ -7,10 +7,11 @@ import pytest
 
 from envs.physics import RobotParams, SimConfig, Simulator, simulate
 from envs.physics.kernel import ANGLE_LIMIT
+from envs.physics.passive import CLASSIC_CYCLE
 
 PAPER = RobotParams.from_preset("paper")
 CLASSIC = RobotParams.from_preset("classic")
-Q0, QD0 = (-0.542550, -0.218775), (0.716732, 1.092867)
+Q0, QD0 = CLASSIC_CYCLE.q, CLASSIC_CYCLE.qd  # a valid start state of the classic walker
 
 
 def test_stiff_viscous_friction_is_rejected_naming_fv_and_its_range():
