@@ -42,6 +42,7 @@ import yaml
 import envs  # noqa: F401  (registers the roughwalk ids)
 from agents.hyperparams import check_hyperparams
 from agents.residual import ResidualWrapper
+from envs.config_util import read_yaml_mapping
 
 # Training seeds lie below TRAIN_SEED_LIMIT, evaluation seeds at or above EVAL_SEED_OFFSET, so
 # the courses used to report results are never those drawn during training. The first
@@ -369,11 +370,14 @@ def load_config(
     if not path.is_file():
         raise ConfigError(f"config file not found: {path}")
     try:
-        data = yaml.safe_load(path.read_text())
-    except yaml.YAMLError as exc:
-        raise ConfigError(f"{path}: not valid YAML: {exc}") from None
-    if not isinstance(data, dict):
-        raise ConfigError(f"{path}: expected a mapping with a 'run' section and an env-id section")
+        data = read_yaml_mapping(
+            path,
+            "agent config",
+            allow_empty=False,
+            holds="mapping with a 'run' section and an env-id section",
+        )
+    except (ValueError, OSError) as exc:
+        raise ConfigError(str(exc)) from None
     return config_from_dict(data, path, overrides, run_overrides)
 
 
