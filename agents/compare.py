@@ -183,6 +183,10 @@ def agent_run(
     return train(cfg, log_dir=log_dir, progress_bar=progress, threads=None)
 
 
+#: the files a comparison writes to its output folder
+OUTPUTS = ("compare.json", "compare.csv", "compare.md")
+
+
 def compare(
     config_dir: Path = CONFIG_DIR,
     log_dir: Path = Path("runs"),
@@ -196,6 +200,7 @@ def compare(
     hyperparams: dict[str, Any] | None = None,
     dry_run: bool = False,
     progress: bool = True,
+    overwrite: bool = False,
 ) -> Comparison:
     """Run the comparison; returns its rows and evaluations (see :class:`Comparison`).
 
@@ -213,10 +218,13 @@ def compare(
         hyperparams: hyperparameters overriding those of every config.
         dry_run: list the rows and their commands only; train, evaluate and write nothing.
         progress: show progress bars.
+        overwrite: replace the outputs of an earlier comparison in ``out`` (else that is an
+            error).
 
     Raises:
         ConfigError, ValueError: bad arguments or configs, an output or log folder that cannot
-            be written; before anything is trained, evaluated or written.
+            be written, an earlier comparison in ``out`` (without ``overwrite``); before anything
+            is trained, evaluated or written.
     """
     for name, value, low in (("--episodes", episodes, 1), ("--seed", seed, 0)):
         if isinstance(value, bool) or not isinstance(value, int) or value < low:
@@ -225,6 +233,12 @@ def compare(
     if not dry_run:
         check_writable(out, "--out")
         check_writable(log_dir, "--log-dir")
+        earlier = [name for name in OUTPUTS if (Path(out) / name).exists()]
+        if earlier and not overwrite:
+            raise ValueError(
+                f"--out {out}: holds an earlier comparison ({', '.join(earlier)}); "
+                "choose another folder or pass --overwrite"
+            )
     rows: list[dict[str, Any]] = []
     evaluations: list[Evaluation] = []
     for s in settings:

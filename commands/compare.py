@@ -43,6 +43,11 @@ def configure(parser: argparse.ArgumentParser) -> None:
         help="runs folder: the latest finished run of each config is reused (default: runs)",
     )
     parser.add_argument("--out", type=Path, default=Path("results"), help="output folder")
+    parser.add_argument(
+        "--overwrite",
+        action="store_true",
+        help="replace an earlier comparison's outputs in --out (else that is an error)",
+    )
     parser.add_argument("--episodes", type=int, default=50, help="episodes per row")
     parser.add_argument(
         "--seed", type=int, default=TEST_SEED, help="held-out seed offset (as evaluate)"
@@ -79,6 +84,7 @@ def run(args: argparse.Namespace) -> int:
             train_missing=not args.no_train,
             dry_run=args.dry_run,
             progress=not args.no_progress,
+            overwrite=args.overwrite,
         )
     except KeyboardInterrupt:
         return 130

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import sys
 from pathlib import Path
 
 import pytest
@@ -103,3 +104,31 @@ def test_compare_resumes_an_interrupted_run_of_the_same_config(tmp_path: Path, m
     assert manifest["resumed_from"] == [str(run / "checkpoints" / "rl_model_128_steps.zip")]
     assert str(run / "model.zip") in row["command"]
     assert [p.name for p in (tmp_path / "runs").iterdir()] == ["ppo_flat_s0"]
+
+
+def test_a_second_comparison_keeps_the_first_unless_told_to_overwrite(tmp_path: Path, monkeypatch):
+    configs = tmp_path / "configs"  # one agent, on another terrain: the flat row is passive only
+    configs.mkdir()
+    (configs / "ppo_stairs.yaml").write_bytes((CONFIG_DIR / "ppo_stairs.yaml").read_bytes())
+    kw = dict(
+        config_dir=configs,
+        log_dir=tmp_path / "runs",
+        out=tmp_path / "results",
+        episodes=1,
+        baselines=("passive",),
+        settings=SETTINGS[:1],
+        progress=False,
+    )
+    compare(**kw)
+    first = {p.name: p.read_bytes() for p in (tmp_path / "results").iterdir()}
+    assert sorted(first) == ["compare.csv", "compare.json", "compare.md"]
+    ran = []
+    # the package exports the function compare under the module's name: patch the module
+    monkeypatch.setattr(sys.modules["agents.compare"], "evaluate", lambda *a, **k: ran.append(a))
+    with pytest.raises(ValueError, match="earlier comparison.*--overwrite"):
+        compare(**kw)
+    assert not ran  # refused before any episode
+    assert {p.name: p.read_bytes() for p in (tmp_path / "results").iterdir()} == first
+    monkeypatch.undo()
+    compare(**kw, overwrite=True, seed=5)
+    assert (tmp_path / "results" / "compare.json").read_bytes() != first["compare.json"]
