@@ -215,6 +215,11 @@ def configure(parser: argparse.ArgumentParser) -> None:
         "--csv", type=output_file, metavar="FILE", help="write one row per episode as CSV"
     )
     parser.add_argument(
+        "--overwrite",
+        action="store_true",
+        help="replace existing --json/--csv files (else an existing file is an error)",
+    )
+    parser.add_argument(
         "--plot-learning-curve",
         nargs="?",
         const="",
@@ -252,6 +257,12 @@ def run(args: argparse.Namespace) -> int:
             raise FileNotFoundError(f"--policy: model file not found: {args.policy}")
     elif args.algo or args.vecnormalize:
         raise ValueError("--algo and --vecnormalize apply to trained models, not to baselines")
+    for option, path in (("--json", args.json), ("--csv", args.csv)):
+        if path is not None and path.exists() and not args.overwrite:
+            raise ValueError(
+                f"{option} {path}: the file exists (an earlier result); choose another name or "
+                "pass --overwrite"
+            )
     curve = _learning_curve_path(args)
     kwargs = dict(args.env_kwargs) if args.env_kwargs else None
     announce_compilation(

@@ -46,6 +46,21 @@ def test_cli_evaluate(tmp_path: Path, capsys, episode_count):
     assert [p.name for p in out.parent.iterdir()] == ["e.json"]  # no temporary file left
 
 
+def test_existing_results_are_kept_unless_told_to_overwrite(tmp_path: Path, capsys, episode_count):
+    out, table = tmp_path / "e.json", tmp_path / "e.csv"
+    argv = ["evaluate", "--policy", "passive", "--env", SLOPE, "--episodes", "1", "--no-progress"]
+    assert main([*argv, "--json", str(out), "--csv", str(table)]) == 0
+    first = (out.read_bytes(), table.read_bytes())
+    for option, path in (("--json", out), ("--csv", table)):
+        assert main([*argv, "--seed", "4", option, str(path)]) == 2
+        err = capsys.readouterr().err
+        assert f"error: {option} {path}: the file exists" in err and "--overwrite" in err
+    assert episode_count[0] == 1  # the refused runs ran no episode
+    assert (out.read_bytes(), table.read_bytes()) == first
+    assert main([*argv, "--seed", "4", "--json", str(out), "--overwrite"]) == 0
+    assert json.loads(out.read_text())["episodes"][0]["seed"] == EVAL_SEED_OFFSET + 4
+
+
 def test_output_paths_are_checked_before_any_episode(tmp_path: Path, capsys, episode_count):
     blocker = tmp_path / "a_file"
     blocker.write_text("x")
