@@ -212,6 +212,7 @@ class Simulator:
         self._parallel = bool(parallel)
         self._kernel = step_parallel if self._parallel else step_serial
         self._P = np.zeros((n, N_PARAMS))
+        self._param_view = _read_only(self._P)
         self.params: list[RobotParams] = [None] * n  # type: ignore[list-item]
         self.set_params(params)
         self.terrains: list[Terrain] = [None] * n  # type: ignore[list-item]
@@ -386,6 +387,25 @@ class Simulator:
             self._ev[i] = 0.0
             self._out[i] = 0.0
 
+    def push_hip(self, index: int, dv: float) -> float:
+        """Push walker ``index`` at the hip: its hip's horizontal velocity jumps by ``dv`` [m/s]
+        (forwards positive), the stance foot held (:func:`envs.physics.model.hip_push`); returns
+        the impulse [N s]. Positions, time and everything else are unchanged.
+
+        Raises:
+            ValueError: a non-finite ``dv`` or a walker that is not running.
+        """
+        i = self._index(index)
+        if not math.isfinite(dv):
+            raise ValueError(f"dv = {dv!r} must be a finite speed change [m/s]")
+        if self._f[i, F_STATUS] != OK:
+            raise ValueError(f"walker {i} is not running (reset it first)")
+        x = self._x[i]
+        d1, d2, impulse = model.hip_push(self._P[i], x[X_Q1], x[X_Q2], float(dv))
+        x[X_Q1D] += d1
+        x[X_Q2D] += d2
+        return float(impulse)
+
     def _select(self, index: Any) -> np.ndarray:
         if index is None:
             return np.arange(self.num_walkers)
@@ -494,6 +514,13 @@ class Simulator:
         :mod:`envs.physics.kernel`; ``n_impacts`` counts the touchdowns of the last step). Updated
         in place like :attr:`states`."""
         return self._flags
+
+    @property
+    def param_vectors(self) -> np.ndarray:
+        """(N, P) read-only view of every walker's parameter vector
+        (:meth:`RobotParams.vector`, the layout of :mod:`envs.physics.params`), as the kernels
+        read it; :meth:`set_params` updates it in place."""
+        return self._param_view
 
     @property
     def terrain_arrays(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
