@@ -127,10 +127,7 @@ class RobotError:
 
 
 def _half_width(name: str, value: Any) -> float:
-    ok = not isinstance(value, bool) and isinstance(
-        value, (int, float, np.integer, np.floating)
-    )
-    if not (ok and math.isfinite(value) and 0.0 <= value < MAX_RELATIVE_ERROR):
+    if not (_real(value) and 0.0 <= value < MAX_RELATIVE_ERROR):
         allowed = f"a relative half-width in [0, {MAX_RELATIVE_ERROR:g})"
         if name == "robot_error":
             allowed += " (0.05: every parameter within +-5 %) or a mapping {parameter: half-width}"

@@ -296,9 +296,7 @@ class RobotParams:
             ok = not isinstance(e, bool) and isinstance(e, (int, float, np.integer, np.floating))
             if not (ok and math.isfinite(e) and e > -1.0):
                 raise ValueError(f"relative error of {name} = {e!r}; allowed: finite > -1")
-        changes = {
-            name: getattr(self, name) * (1.0 + float(e)) for name, e in errors.items()
-        }
+        changes = {name: getattr(self, name) * (1.0 + float(e)) for name, e in errors.items()}
         changes["lc"] = changes.get("lc", self.lc) * (1.0 + float(errors.get("l", 0.0)))
         return self.replace(**changes)
 
