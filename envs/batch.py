@@ -316,7 +316,7 @@ class WalkerBatch:
         self._after_step = _after_step_parallel if par else _after_step_serial
         # model error: each walker's true hip torque at |action| = 1 [N m], and its parameters
         self._tau_limits = np.full(n, self.torque_limit) if s.robot_error.enabled else None
-        self.robots: list[dict[str, float] | None] = [None] * n
+        self.robots = np.full(n, None, dtype=object)  # the true parameters, dicts of floats
         self.pushes = PushSchedule(s.push, n) if s.push is not None else None
         self.layout = SensorLayout.from_config(s.sensors)
         low, high = observation_bounds(s.sensors, s.observation)
@@ -481,8 +481,7 @@ class WalkerBatch:
             "terrain": self.specs.copy(),
         }
         if self._tau_limits is not None:
-            d["robot"] = robots = np.empty(self.n, dtype=object)
-            robots[:] = [dict(r) for r in self.robots]
+            d["robot"] = self.robots.copy()
         mask = np.ones(self.n, dtype=bool)  # one array shared by all keys (every entry is valid)
         for key in list(d):
             d["_" + key] = mask

@@ -111,10 +111,10 @@ class CompassGaitEnv(gym.Env):
     ``terrain`` (the course's spec dict: ``Terrain.from_dict`` rebuilds it exactly, so any
     episode can be replayed; do not modify it). The vector env returns it at every step.
     Under a model error (``robot_error``) ``robot`` (the true parameters of this episode, a
-    dict of floats: ``RobotParams.from_dict`` rebuilds it) comes with ``terrain``; a step in
-    which the hip was pushed (``push``) has ``push``: ``{"time": s, "dv": m/s (signed,
-    forwards positive), "impulse": N s}`` (in the vector env, Gymnasium's nested arrays with
-    their ``_`` masks).
+    dict of floats: ``RobotParams.from_dict`` rebuilds it) comes with ``terrain``, also at
+    every step of the vector env (do not modify it); a step in which the hip was pushed
+    (``push``) has ``push``: ``{"time": s, "dv": m/s (signed, forwards positive),
+    "impulse": N s}`` (in the vector env, Gymnasium's nested arrays with their ``_`` masks).
 
     ## Arguments
 
