@@ -147,7 +147,8 @@ class PushConfig:
     """Random horizontal pushes at the hip (the env setting ``push``, a mapping of these
     fields).
 
-    When (exactly one of ``every``, ``at``, ``times``), each time an opportunity:
+    Exactly one of ``every``, ``at`` and ``times`` says when; each such time is an
+    opportunity for a push (thinned by ``probability``, ``max_pushes`` and ``after``).
 
     Attributes:
         dv: the speed change of the hip [m/s]: a number or a range ``[lo, hi]`` drawn
@@ -195,6 +196,9 @@ class PushConfig:
             set_(self, "every", _range("push.every", self.every, 0.0, math.inf, "s", True))
         if self.at is not None and self.at not in PUSH_PHASES:
             raise ValueError(f"push.at = {self.at!r}; allowed: {list(PUSH_PHASES)}")
+        if not (_real(self.after) and self.after >= 0.0):
+            raise ValueError(f"push.after = {self.after!r}; allowed: a time >= 0 s")
+        set_(self, "after", float(self.after))
         if self.times is not None:
             set_(self, "times", _times(self.times))
             if self.after != 0.0:
@@ -208,9 +212,6 @@ class PushConfig:
             if not (_real(mp) and mp == int(mp) and mp >= 1):
                 raise ValueError(f"push.max_pushes = {mp!r}; allowed: an integer >= 1 or None")
             set_(self, "max_pushes", int(mp))
-        if not (_real(self.after) and self.after >= 0.0):
-            raise ValueError(f"push.after = {self.after!r}; allowed: a time >= 0 s")
-        set_(self, "after", float(self.after))
 
     @classmethod
     def from_setting(cls, value: Any) -> PushConfig | None:

@@ -229,6 +229,7 @@ BAD = [
     ({"push": {"dv": 0.1, "at": "mid_stance", "probability": 0}}, r"push\.probability = 0;"),
     ({"push": {"dv": 0.1, "at": "mid_stance", "max_pushes": 0}}, r"push\.max_pushes = 0;"),
     ({"push": {"dv": 0.1, "times": [1.0], "after": 2}}, r"push\.after applies to 'every' and"),
+    ({"push": {"dv": 0.1, "every": 1, "after": -1}}, r"push\.after = -1; allowed: a time >= 0"),
     ({"push": "often"}, r"push must be a mapping .* got 'often'"),
 ]
 
