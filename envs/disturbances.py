@@ -34,6 +34,8 @@ MAX_PUSH = 5.0
 #: phases of a step a push can be tied to (``push.at``)
 PUSH_PHASES = ("mid_stance", "touchdown")
 PUSH_DIRECTIONS = ("random", "forward", "backward")
+#: how ``robot_error`` draws a parameter within its half-width ``w`` (``robot_error.draw``)
+ROBOT_ERROR_DRAWS = ("uniform", "sign")
 #: a push due at time ``t`` happens at the first control period starting at ``t - TIME_TOL``
 #: or later [s]
 TIME_TOL = 1e-9
@@ -54,11 +56,22 @@ class RobotError:
     """
 
     half_widths: tuple[tuple[str, float], ...] = ()
+    draw_mode: str = "uniform"
+
+    def __post_init__(self) -> None:
+        if self.draw_mode not in ROBOT_ERROR_DRAWS:
+            raise ValueError(
+                f"robot_error.draw = {self.draw_mode!r}; allowed: {list(ROBOT_ERROR_DRAWS)}"
+            )
 
     @classmethod
     def from_setting(cls, value: Any) -> RobotError:
         """The setting ``robot_error``: None or 0 (no error), a float (every physical
         parameter) or a mapping ``{parameter: half-width}``; a :class:`RobotError` as it is.
+        The mapping may also hold ``all`` (a half-width for every physical parameter that it
+        does not name) and ``draw``: ``"uniform"`` (default: each parameter uniform within
+        ``+-w``) or ``"sign"`` (each parameter at exactly ``+w`` or ``-w``, the sign at random:
+        the corners of the error box, as in a robustness benchmark).
 
         Raises:
             ValueError: a value that is none of those, an unknown parameter name or a
@@ -68,18 +81,24 @@ class RobotError:
             return value
         if value is None:
             return cls()
+        mode = "uniform"
         if isinstance(value, Mapping):
-            unknown = sorted((k for k in value if k not in PHYSICAL_PARAMS), key=str)
+            value = dict(value)
+            mode = value.pop("draw", mode)
+            unknown = sorted((k for k in value if k not in PHYSICAL_PARAMS + ("all",)), key=str)
             if unknown:
                 raise ValueError(
                     f"robot_error: unknown parameter(s) {unknown}; allowed: "
-                    f"{list(PHYSICAL_PARAMS)} (the robot's physical parameters)"
+                    f"{list(PHYSICAL_PARAMS)} (the robot's physical parameters), 'all', 'draw'"
                 )
             widths = {k: _half_width(f"robot_error[{k!r}]", v) for k, v in value.items()}
+            every = widths.pop("all", 0.0)
+            widths = {k: widths.get(k, every) for k in PHYSICAL_PARAMS}
         else:
             w = _half_width("robot_error", value)
             widths = dict.fromkeys(PHYSICAL_PARAMS, w)
-        return cls(tuple((k, widths[k]) for k in PHYSICAL_PARAMS if widths.get(k, 0.0) > 0.0))
+        kept = tuple((k, widths[k]) for k in PHYSICAL_PARAMS if widths.get(k, 0.0) > 0.0)
+        return cls(kept, mode)
 
     @property
     def enabled(self) -> bool:
@@ -87,19 +106,25 @@ class RobotError:
         return bool(self.half_widths)
 
     def to_setting(self) -> dict[str, float]:
-        """The setting as a mapping ``{parameter: half-width}`` (YAML serialisable)."""
-        return dict(self.half_widths)
+        """The setting as a mapping ``{parameter: half-width}`` (YAML serialisable), with
+        ``draw`` when it is not the default."""
+        out: dict[str, Any] = dict(self.half_widths)
+        if self.draw_mode != "uniform":
+            out["draw"] = self.draw_mode
+        return out
 
     def draw(self, robot: RobotParams, rng: np.random.Generator) -> RobotParams:
         """The simulated robot of one episode: each perturbed parameter of the nominal
-        ``robot`` times ``1 + w * U(-1, 1)``, one uniform draw per parameter from ``rng`` in
-        the order of ``half_widths`` (:meth:`envs.physics.RobotParams.perturbed`: ``lc``
-        moves with ``l``).
+        ``robot`` times ``1 + w * U(-1, 1)`` (``draw="sign"``: ``1 + w * sign(U(-1, 1))``),
+        one uniform draw per parameter from ``rng`` in the order of ``half_widths``
+        (:meth:`envs.physics.RobotParams.perturbed`: ``lc`` moves with ``l``).
 
         Raises:
             ValueError: the draw is not a valid robot (the message names the parameter).
         """
         u = rng.uniform(-1.0, 1.0, size=len(self.half_widths))
+        if self.draw_mode == "sign":
+            u = np.where(u < 0.0, -1.0, 1.0)
         return self._apply(robot, {k: w * float(x) for (k, w), x in zip(self.half_widths, u)})
 
     def check(self, robot: RobotParams) -> None:

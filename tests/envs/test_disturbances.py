@@ -73,6 +73,32 @@ def test_robot_error_mapping_perturbs_only_the_parameters_named():
         assert true["lc"] / true["l"] == pytest.approx(PAPER.lc / PAPER.l)
 
 
+def test_robot_error_sign_draws_put_every_parameter_at_a_corner():
+    """``draw: sign`` puts each parameter at exactly +-w (random sign, same generator draws as
+    the uniform mode); ``all`` gives every parameter not named its width."""
+    env = gym.make(STAIRS, robot_error={"all": 0.1, "ktau": 0.2, "draw": "sign"})
+    uniform = gym.make(STAIRS, robot_error={"all": 0.1, "ktau": 0.2})
+    signs: list[bool] = []
+
+    def ratio(robot: dict, name: str) -> float:
+        if name == "lc":  # moves with l, then by its own error
+            return (robot["lc"] / robot["l"]) / (PAPER.lc / PAPER.l)
+        return robot[name] / getattr(PAPER, name)
+
+    for seed in range(8):
+        true = env.reset(seed=seed)[1]["robot"]
+        ref = uniform.reset(seed=seed)[1]["robot"]
+        for name in PHYSICAL_PARAMS:
+            w = 0.2 if name == "ktau" else 0.1
+            assert abs(ratio(true, name) - 1.0) == pytest.approx(w, rel=1e-12), name
+            assert (ratio(true, name) > 1.0) == (ratio(ref, name) > 1.0), name  # same draws
+            signs.append(ratio(true, name) > 1.0)
+    assert 0.3 < np.mean(signs) < 0.7
+    setting = env.unwrapped.settings.robot_error.to_setting()
+    assert setting["draw"] == "sign" and setting["ktau"] == 0.2 and setting["m"] == 0.1
+    assert RobotError.from_setting(setting) == env.unwrapped.settings.robot_error
+
+
 def test_robot_error_changes_the_simulated_robot_only():
     """Same course, start and sensor noise as without the error; the torque is the true
     motor's; the hip progress uses the true leg."""
@@ -215,6 +241,7 @@ BAD = [
     ({"robot_error": {"leg": 0.1}}, r"robot_error: unknown parameter\(s\) \['leg'\]; allowed"),
     ({"robot_error": {"g": 0.1}}, r"unknown parameter\(s\) \['g'\]"),
     ({"robot_error": {"l": 0.7}}, r"robot_error\['l'\] = 0\.7; allowed: a relative half-width"),
+    ({"robot_error": {"all": 0.1, "draw": "corners"}}, r"robot_error\.draw = 'corners'; allo"),
     ({"push": {"dv": -0.1, "at": "mid_stance"}}, r"push\.dv = -0\.1 out of range; allowed"),
     ({"push": {"dv": 6, "at": "mid_stance"}}, r"push\.dv = 6 out of range; allowed: .* 5\] m/s"),
     ({"push": {"dv": [0.2, 0.1], "at": "mid_stance"}}, r"push\.dv = \[0\.2, 0\.1\]; .*lo <= hi"),
