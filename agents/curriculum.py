@@ -214,13 +214,12 @@ def _number(value: Any) -> bool:
 
 def _random_source(terrain: str | dict[str, Any], difficulty: float) -> TerrainSource:
     """``terrain`` scaled to ``difficulty``; it must be a random course generator."""
-    source = TerrainSource(terrain, difficulty)
-    if not source.is_random:
+    if not TerrainSource(terrain).is_random:
         raise ValueError(
             f"terrain {terrain!r} is fixed: a curriculum needs a random terrain kind "
             "(blocks, piecewise) without a seed"
         )
-    return source
+    return TerrainSource(terrain, difficulty)
 
 
 def _level_source(env: gym.Env, terrain: str | dict[str, Any] | None, d: float) -> TerrainSource:
@@ -231,10 +230,10 @@ def _level_source(env: gym.Env, terrain: str | dict[str, Any] | None, d: float) 
     kwargs = spec.kwargs if spec is not None else {}
     if "config" not in kwargs:
         raise ValueError("TerrainCurriculum: the env has no registered config; give terrain")
-    source = resolve_env_settings(kwargs["config"], terrain=kwargs.get("terrain"), difficulty=d)
-    if not source.terrain.is_random:
+    config, terrain = kwargs["config"], kwargs.get("terrain")
+    if not resolve_env_settings(config, terrain=terrain, difficulty=1.0).terrain.is_random:
         raise ValueError(
-            f"TerrainCurriculum: the env's terrain is fixed (config {kwargs['config']!r}); a "
-            "curriculum needs a random terrain kind (blocks, piecewise) or the terrain argument"
+            f"TerrainCurriculum: the env's terrain is fixed (config {config!r}); a curriculum "
+            "needs a random terrain kind (blocks, piecewise) or the terrain argument"
         )
-    return source.terrain
+    return resolve_env_settings(config, terrain=terrain, difficulty=d).terrain
