@@ -270,6 +270,46 @@ class CriticWarmup(BaseCallback):
             self.model.ent_coef_optimizer.state.clear()
 
 
+class ResidualScaleRamp(BaseCallback):
+    """Ramps the residual authority of the training envs (``agents.residual.ResidualWrapper``'s
+    ``scale``) linearly from 0 to its configured value over the first ``steps`` env steps,
+    set at the start of every rollout (the evaluation envs keep the full scale). Logs
+    ``train/residual_scale_fraction``.
+
+    Args:
+        steps: length of the ramp [env steps, all envs together], >= 1.
+    """
+
+    def __init__(self, steps: int) -> None:
+        super().__init__()
+        if isinstance(steps, bool) or not isinstance(steps, int) or steps < 1:
+            raise ValueError(f"scale_ramp: must be an integer >= 1 (env steps), got {steps!r}")
+        self.steps = steps
+        self.full: list[float] = []
+
+    def fraction(self) -> float:
+        """The fraction of the full scale at the current step."""
+        return min(self.model.num_timesteps / self.steps, 1.0)
+
+    def _on_training_start(self) -> None:
+        self.full = [float(s) for s in self.training_env.get_attr("max_scale")]
+        self._apply(self.fraction())
+
+    def _on_rollout_start(self) -> None:
+        self._apply(self.fraction())
+
+    def _on_step(self) -> bool:
+        return True
+
+    def _on_training_end(self) -> None:
+        self._apply(1.0)
+
+    def _apply(self, fraction: float) -> None:
+        for i, full in enumerate(self.full):
+            self.training_env.env_method("set_scale", full * fraction, indices=[i])
+        self.logger.record("train/residual_scale_fraction", fraction)
+
+
 class CurriculumLog(BaseCallback):
     """Logs the terrain curriculum (``agents.curriculum.TerrainCurriculum``) of the training
     envs whenever an episode ends: ``curriculum/difficulty_mean``, ``_min``, ``_max``, the

@@ -19,11 +19,13 @@ One file describes one training run. It holds two top-level sections:
       residual_init: default         # default | zero: zero last actor layer (start at the base)
       init_log_std: null             # initial exploration log std (PPO, A2C, SAC); null: default
       critic_warmup: 0               # env steps training only the critic, the actor frozen
+      scale_ramp: 0                  # env steps ramping the residual scale up from 0
 
-The last three (``agents.hyperparams.RUN_OPTIONS``) are the residual-learning recipe of Silver
+The last four (``agents.hyperparams.RUN_OPTIONS``) are the residual-learning recipe of Silver
 et al. 2018: with ``residual_init: zero`` a new model's action is exactly 0, so a residual
 agent starts as its base policy (``agents.residual.init_policy``); ``critic_warmup`` trains
-the value function on the frozen policy's transitions first (``agents.callbacks.CriticWarmup``).
+the value function on the frozen policy's transitions first (``agents.callbacks.CriticWarmup``);
+``scale_ramp`` grows the residual's authority (``agents.callbacks.ResidualScaleRamp``).
 
 ``<env id>`` (rl-zoo3's hyperparameter format): ``policy``, ``n_timesteps``, ``n_envs``,
 ``normalize``, ``frame_stack``, ``env_kwargs``, ``env_wrapper``, ``policy_kwargs`` and the
@@ -172,6 +174,7 @@ class AgentConfig:
         residual_init: ``default`` or ``zero`` (``agents.hyperparams.RUN_OPTIONS``).
         init_log_std: initial log standard deviation of the exploration, or None.
         critic_warmup: env steps during which only the critic learns (0: none).
+        scale_ramp: env steps over which the residual scale rises from 0 (0: none).
         raw: the file's contents as read.
     """
 
@@ -189,6 +192,7 @@ class AgentConfig:
     residual_init: str = "default"
     init_log_std: float | None = None
     critic_warmup: int = 0
+    scale_ramp: int = 0
     raw: dict[str, Any] = field(default_factory=dict, repr=False)
 
     @property
@@ -487,6 +491,7 @@ def config_from_dict(
         residual_init=run["residual_init"],
         init_log_std=run["init_log_std"],
         critic_warmup=run["critic_warmup"],
+        scale_ramp=run["scale_ramp"],
         raw=dict(data),
     )
     if cfg.vec_env not in VEC_ENVS:
@@ -526,6 +531,8 @@ def _check_wrapper_arguments(path: Path, cls: type, kwargs: dict[str, Any]) -> N
 def _check_run_options(cfg: AgentConfig) -> None:
     """The residual-learning options against the algorithm and its hyperparameters."""
     kwargs = cfg.algo_kwargs()
+    if cfg.scale_ramp and not cfg.is_residual:
+        raise ConfigError(f"{cfg.path}: run.scale_ramp needs an agents.residual.ResidualWrapper")
     if cfg.init_log_std is not None:
         if cfg.algo not in RUN_OPTIONS["init_log_std"].algos:
             raise ConfigError(

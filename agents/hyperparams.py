@@ -287,6 +287,14 @@ RUN_OPTIONS: dict[str, Hyperparameter] = {
             "learns, the actor frozen [env steps]",
             lo=0,
         ),
+        _h(
+            "scale_ramp",
+            ALL,
+            "int",
+            "env steps over which the training envs' residual scale rises linearly from 0 to "
+            "the ResidualWrapper's scale (0: the full scale from the start) [env steps]",
+            lo=0,
+        ),
     )
 }
 #: the defaults of :data:`RUN_OPTIONS` (a config without them trains as before)
@@ -294,6 +302,7 @@ RUN_OPTION_DEFAULTS: dict[str, Any] = {
     "residual_init": "default",
     "init_log_std": None,
     "critic_warmup": 0,
+    "scale_ramp": 0,
 }
 
 

@@ -37,6 +37,8 @@ from agents.policies import Policy, make_baseline_policy
 from agents.wrappers import ESTIMATE_HIGH, ESTIMATE_LOW, estimate_features
 
 BaseSpec = str | Policy | Callable[[gym.Env], Policy]
+#: largest residual authority [action units]: the command range [-1, 1] spans 2
+MAX_SCALE = 2.0
 
 
 class ResidualWrapper(gym.Wrapper, gym.utils.RecordConstructorArgs):
@@ -49,7 +51,8 @@ class ResidualWrapper(gym.Wrapper, gym.utils.RecordConstructorArgs):
             (``"reference"``, ``"pd"``, ``"passive"``), a policy object, or a factory
             ``env -> policy`` (called once with the wrapped env).
         scale: residual authority, in action units: the agent can move the command by at most
-            ``scale`` either way; > 0.
+            ``scale`` either way; in (0, 2] (2 spans the whole command range). Training can
+            ramp it up from 0 (:meth:`set_scale`, ``agents.callbacks.ResidualScaleRamp``).
         observe_base: append the base command to the observation.
         observe_state: append the base policy's state estimate ``q1, q2, q1d, q2d, stance leg``
             [rad, rad/s, 0/1] (``agents.wrappers.estimate_features``) before the base command; the
@@ -81,9 +84,12 @@ class ResidualWrapper(gym.Wrapper, gym.utils.RecordConstructorArgs):
         act = env.action_space
         if not isinstance(act, spaces.Box):
             raise ValueError(f"ResidualWrapper needs a Box action space, got {act}")
-        if not (np.isfinite(scale) and scale > 0):
-            raise ValueError(f"scale = {scale!r} is out of range; allowed: > 0 (action units)")
+        if not (np.isfinite(scale) and 0 < scale <= MAX_SCALE):
+            raise ValueError(
+                f"scale = {scale!r} is out of range; allowed: in (0, {MAX_SCALE:g}] (action units)"
+            )
         self.scale = float(scale)
+        self.max_scale = float(scale)
         self.observe_base = bool(observe_base)
         self.observe_state = bool(observe_state)
         self._low = act.low.astype(np.float64)
@@ -124,6 +130,18 @@ class ResidualWrapper(gym.Wrapper, gym.utils.RecordConstructorArgs):
                 f"(e.g. 'reference' or 'pd'), got {self.base_name!r}"
             )
         self._base = np.zeros(act.shape, dtype=np.float64)
+
+    def set_scale(self, scale: float) -> None:
+        """Set the residual authority for the next steps (a schedule during training).
+
+        Args:
+            scale: in [0, the constructed ``scale``] [action units].
+        """
+        if not (np.isfinite(scale) and 0 <= scale <= self.max_scale):
+            raise ValueError(
+                f"scale = {scale!r} is out of range; allowed: in [0, {self.max_scale}]"
+            )
+        self.scale = float(scale)
 
     def _base_command(self, obs: Any) -> np.ndarray:
         """The base policy's command for ``obs``, clipped to the action limits."""

@@ -156,8 +156,8 @@ def check_env(cfg: AgentConfig) -> None:
 
 def make_callbacks(cfg: AgentConfig, run_dir: Path, eval_env: Any, report: bool = True) -> list:
     """Checkpoints (with VecNormalize statistics), held-out periodic evaluation, the critic
-    warm-up (``run.critic_warmup``) and the terrain curriculum's log (with a
-    ``TerrainCurriculum`` wrapper).
+    warm-up (``run.critic_warmup``), the residual scale ramp (``run.scale_ramp``) and the
+    terrain curriculum's log (with a ``TerrainCurriculum`` wrapper).
 
     Args:
         cfg: the agent config (frequencies in env steps, all envs together).
@@ -171,6 +171,7 @@ def make_callbacks(cfg: AgentConfig, run_dir: Path, eval_env: Any, report: bool 
         CriticWarmup,
         CurriculumLog,
         HeldOutEvalCallback,
+        ResidualScaleRamp,
         SaveBestModel,
     )
     from agents.curriculum import TerrainCurriculum
@@ -178,6 +179,8 @@ def make_callbacks(cfg: AgentConfig, run_dir: Path, eval_env: Any, report: bool 
     callbacks: list = []
     if cfg.critic_warmup > 0:
         callbacks.append(CriticWarmup(cfg.critic_warmup))
+    if cfg.scale_ramp > 0:
+        callbacks.append(ResidualScaleRamp(cfg.scale_ramp))
     if any(issubclass(cls, TerrainCurriculum) for cls, _ in cfg.wrapper_specs()):
         callbacks.append(CurriculumLog())
     if cfg.checkpoint_freq > 0:

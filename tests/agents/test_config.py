@@ -200,6 +200,7 @@ def test_planned_timesteps_round_the_budget_up_to_whole_updates():
             "run.init_log_std and policy_kwargs.log_std_init both",
         ),
         ({"algo": "td3", "init_log_std": -1.0}, {}, "TD3 has no log standard deviation"),
+        ({"scale_ramp": 100}, {}, "run.scale_ramp needs an agents.residual.ResidualWrapper"),
         ({"algo": "sac", "residual_init": "zero"}, {}, "needs learning_starts: 0 \\(got 100\\)"),
         (
             {},

@@ -150,3 +150,38 @@ def test_actor_learns_once_the_warmup_is_over(algo, tmp_path):
 def test_critic_warmup_rejects_a_bad_length():
     with pytest.raises(ValueError, match="critic_warmup: must be an integer >= 0"):
         CriticWarmup(-1)
+
+
+class _Scales(BaseCallback):
+    def __init__(self) -> None:
+        super().__init__()
+        self.scales: list[list[float]] = []
+
+    def _on_rollout_start(self) -> None:
+        self.scales.append(self.training_env.get_attr("scale"))
+
+    def _on_step(self) -> bool:
+        return True
+
+
+def test_scale_ramp_grows_the_residual_authority_of_the_training_envs(tmp_path):
+    wrapper = {"agents.residual.ResidualWrapper": {"base": "passive", "scale": 0.5}}
+    hyper = {
+        "n_timesteps": 128,
+        "n_steps": 32,
+        "n_envs": 2,
+        "batch_size": 32,
+        "n_epochs": 1,
+        "env_kwargs": {"max_episode_steps": 40},
+        "env_wrapper": [wrapper],
+    }
+    run = {"algo": "ppo", "env": FLAT, "scale_ramp": 128, "eval_freq": 0, "checkpoint_freq": 0}
+    cfg = config_from_dict({"run": run, FLAT: hyper})
+    model, venv, _ = build(cfg, tmp_path, tensorboard=False)
+    probe = _Scales()
+    model.learn(cfg.n_timesteps, callback=[*make_callbacks(cfg, tmp_path, None), probe])
+    assert probe.scales == [[0.0, 0.0], [0.25, 0.25]]  # rollouts of 64 steps
+    assert venv.get_attr("scale") == [0.5, 0.5]  # full scale after training
+    venv.close()
+    with pytest.raises(ValueError, match=r"scale = 0.6 is out of range; allowed: in \[0, 0.5\]"):
+        venv.env_method("set_scale", 0.6, indices=[0])
