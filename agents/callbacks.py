@@ -312,7 +312,7 @@ class ResidualScaleRamp(BaseCallback):
 
 class CurriculumLog(BaseCallback):
     """Logs the terrain curriculum (``agents.curriculum.TerrainCurriculum``) of the training
-    envs whenever an episode ends: ``curriculum/difficulty_mean``, ``_min``, ``_max``, the
+    envs at the end of every rollout: ``curriculum/difficulty_mean``, ``_min``, ``_max``, the
     mean level ``curriculum/level_mean``, the episodes promoted and demoted so far
     (``curriculum/promoted``, ``curriculum/demoted``) and, in TensorBoard, the histogram of
     the envs' difficulties ``curriculum/difficulty``."""
@@ -330,19 +330,17 @@ class CurriculumLog(BaseCallback):
         self.level = np.asarray(env.get_attr("curriculum_level"), dtype=float)
 
     def _on_step(self) -> bool:
-        ended = False
         for i, info in enumerate(self.locals.get("infos") or ()):
             event = info.get("curriculum")
-            if event is None:
-                continue
-            ended = True
-            self.difficulty[i] = event["next_difficulty"]
-            self.level[i] = event["next_level"]
-            self.promoted += event["next_level"] > event["level"]
-            self.demoted += event["next_level"] < event["level"]
-        if ended:
-            self.record()
+            if event is not None:
+                self.difficulty[i] = event["next_difficulty"]
+                self.level[i] = event["next_level"]
+                self.promoted += event["next_level"] > event["level"]
+                self.demoted += event["next_level"] < event["level"]
         return True
+
+    def _on_rollout_end(self) -> None:
+        self.record()
 
     def record(self) -> None:
         """Record the current levels in the logger."""
