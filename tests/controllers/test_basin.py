@@ -107,7 +107,11 @@ def test_certified_level_counts_held_out_failures_and_unbounded_case():
 
 @pytest.mark.parametrize(
     ("V", "failed", "match"),
-    [([1.0], [False], "length"), ([1.0, -1.0], [False, False], ">= 0"), ([1.0, 2.0], [1], "same length")],
+    [
+        ([1.0], [False], "length"),
+        ([1.0, -1.0], [False, False], ">= 0"),
+        ([1.0, 2.0], [1], "same length"),
+    ],
 )
 def test_certified_level_rejects_bad_input(V, failed, match):
     with pytest.raises(ValueError, match=match):
