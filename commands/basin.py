@@ -28,7 +28,6 @@ import argparse
 import csv
 import json
 import math
-import os
 import time
 from pathlib import Path
 from typing import Any
@@ -44,6 +43,7 @@ from commands.cli import (
     int_range,
     output_dir,
 )
+from commands.mfpt import save_figure
 from controllers.basin import (
     COORDS,
     NO_STATE,
@@ -139,7 +139,7 @@ def _plot_fraction(rows: list[dict[str, Any]], level: LevelSet, path: Path, conf
     ax.set_ylim(-0.02, 1.02)
     ax.grid(alpha=0.3)
     ax.legend(fontsize=8)
-    _save(fig, path)
+    save_figure(fig, path)
 
 
 def _plot_slice(
@@ -174,21 +174,7 @@ def _plot_slice(
         f"green: converged, red: not, grey: no state; blue: V = rho; {COORDS[3 - a - b]} = 0",
         fontsize=8,
     )
-    _save(fig, path)
-
-
-def _save(fig: Any, path: Path) -> None:
-    import matplotlib.pyplot as plt
-
-    path.parent.mkdir(parents=True, exist_ok=True)
-    tmp = path.with_name(f".{path.name}.tmp.png")
-    try:
-        fig.tight_layout()
-        fig.savefig(tmp, dpi=120)
-        os.replace(tmp, path)
-    finally:
-        tmp.unlink(missing_ok=True)
-        plt.close(fig)
+    save_figure(fig, path)
 
 
 def _sample_dict(s: BasinSample, kind: str) -> dict[str, Any]:

@@ -14,8 +14,9 @@ that assumption against a failure probability that changes with the footstep num
 the assumption does not fit; the JSON has the Kaplan-Meier survival curve of every level).
 
 Writes OUT/mfpt.json (every walk, the Kaplan-Meier curves, the checks), OUT/mfpt.csv (one row
-per policy and level) and OUT/mfpt.png (MFPT against roughness on a log axis); an existing
-result in OUT stops the command before any walk unless --overwrite.
+per policy and level), OUT/mfpt.png (MFPT against roughness on a log axis) and
+OUT/mfpt_survival.png (the Kaplan-Meier survival of every level against the geometric model's
+(1 - p)^k); an existing result in OUT stops the command before any walk unless --overwrite.
 """
 
 from __future__ import annotations
@@ -28,8 +29,17 @@ import os
 from pathlib import Path
 from typing import Any
 
+import numpy as np
+
 from agents.evaluate import _write_atomically
-from agents.mfpt import CENSORED, DEFAULT_ENV, MFPTResult, check_run_args, mfpt_sweep
+from agents.mfpt import (
+    CENSORED,
+    DEFAULT_ENV,
+    MFPTResult,
+    check_run_args,
+    kaplan_meier,
+    mfpt_sweep,
+)
 from agents.policies import BASELINES
 from commands.cli import (
     CONTROLLER_KERNELS,
@@ -41,7 +51,7 @@ from commands.cli import (
     output_dir,
 )
 
-OUTPUTS = ("mfpt.json", "mfpt.csv", "mfpt.png")
+OUTPUTS = ("mfpt.json", "mfpt.csv", "mfpt.png", "mfpt_survival.png")
 CSV_COLUMNS = (
     "policy",
     "roughness_m",
@@ -186,10 +196,48 @@ def plot_mfpt(results: list[MFPTResult], path: Path, leg: float) -> None:
     pct = round(100 * results[0].estimate.confidence)
     ax.set_title(f"MFPT with {pct} % intervals", fontsize=10)
     ax.legend(fontsize=8)
-    fig.tight_layout()
+    save_figure(fig, path)
+
+
+def plot_survival(results: list[MFPTResult], path: Path) -> None:
+    """Kaplan-Meier survival per level (steps) against the geometric model (dashed), one
+    panel per policy."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    policies = list(dict.fromkeys(r.policy for r in results))
+    fig, axes = plt.subplots(
+        1, len(policies), figsize=(4.8 * len(policies), 3.8), squeeze=False, sharey=True
+    )
+    for ax, policy in zip(axes[0], policies):
+        for k, r in enumerate(x for x in results if x.policy == policy):
+            km = kaplan_meier([w.footsteps for w in r.walks], [w.failed for w in r.walks])
+            steps = np.concatenate(([0], km["step"]))
+            surv = np.concatenate(([1.0], km["survival"]))
+            label = f"R = {1000 * r.roughness:g} mm"
+            ax.step(steps, np.maximum(surv, 1e-3), where="post", color=f"C{k}", label=label)
+            ax.plot(steps, (1 - r.estimate.p_fail) ** steps, "--", color=f"C{k}", lw=0.8)
+        ax.set_yscale("log")
+        ax.set_ylim(1e-3 * 0.8, 1.2)
+        ax.set_xlabel("footsteps")
+        ax.set_title(f"{policy}: Kaplan-Meier (steps), geometric (dashed)", fontsize=9)
+        ax.grid(alpha=0.3)
+        ax.legend(fontsize=7)
+    axes[0][0].set_ylabel("survival")
+    save_figure(fig, path)
+
+
+def save_figure(fig: Any, path: Path) -> None:
+    """Save the matplotlib ``fig`` as ``path`` (PNG, via a temporary file: no partial file
+    is left) and close it."""
+    import matplotlib.pyplot as plt
+
     path.parent.mkdir(parents=True, exist_ok=True)
     tmp = path.with_name(f".{path.name}.tmp.png")
     try:
+        fig.tight_layout()
         fig.savefig(tmp, dpi=120)
         os.replace(tmp, path)
     finally:
@@ -255,5 +303,6 @@ def run(args: argparse.Namespace) -> int:
 
     _write_atomically(out / "mfpt.csv", write_csv)
     plot_mfpt(results, out / "mfpt.png", leg)
-    print(f"wrote {out / 'mfpt.json'}, {out / 'mfpt.csv'}, {out / 'mfpt.png'}")
+    plot_survival(results, out / "mfpt_survival.png")
+    print(f"wrote {out}/mfpt.json, mfpt.csv, mfpt.png and mfpt_survival.png")
     return 0

@@ -39,7 +39,9 @@ def test_mfpt_writes_results_and_stops_below_the_threshold(tmp_path: Path, capsy
     rows = list(csv.DictReader((out / "mfpt.csv").open()))
     assert len(rows) == 1 and rows[0]["policy"] == "passive" and rows[0]["walks"] == "3"
     assert (out / "mfpt.png").stat().st_size > 0
-    assert sorted(p.name for p in out.iterdir()) == ["mfpt.csv", "mfpt.json", "mfpt.png"]
+    assert (out / "mfpt_survival.png").stat().st_size > 0
+    names = ["mfpt.csv", "mfpt.json", "mfpt.png", "mfpt_survival.png"]
+    assert sorted(p.name for p in out.iterdir()) == names
 
 
 @pytest.mark.parametrize(
