@@ -29,7 +29,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Any
 
 import numpy as np
@@ -208,7 +208,14 @@ def sample_basin(
 ) -> list[BasinSample]:
     """Perturbations ``z = r L^-T u`` (``P = L L'``, ``u`` uniform on the unit sphere), so that
     ``z' P z = r^2``, ``per_radius`` of them at each radius ``r`` in ``radii`` (> 0), each run by
-    :func:`run_perturbation`; directions from ``np.random.default_rng(seed)``."""
+    :func:`run_perturbation` (with ``V0`` set to ``r^2`` exactly); directions from
+    ``np.random.default_rng(seed)``.
+
+    Args:
+        ref: the periodic gait; radii: perturbation sizes ``r``; per_radius: starts per size,
+            >= 1; seed: seed of the directions; steps, v_tol: as for :func:`run_perturbation`;
+        on_sample: called with each finished sample (progress).
+    """
     rs = [float(r) for r in radii]
     if not rs or not all(math.isfinite(r) and r > 0 for r in rs):
         raise ValueError(f"radii must be numbers > 0, got {list(radii)!r}")
@@ -221,7 +228,8 @@ def sample_basin(
     out = []
     for r in rs:
         for u in sphere_directions(rng, per_radius):
-            s = run_perturbation(ref, r * (Linv_t @ u), steps, v_tol)
+            # V0 = r^2 exactly, so that starts of one size are one level of V
+            s = replace(run_perturbation(ref, r * (Linv_t @ u), steps, v_tol), V0=r * r)
             out.append(s)
             if on_sample is not None:
                 on_sample(s)
@@ -372,8 +380,10 @@ def slice_grid(
     on_sample: Callable[[BasinSample], None] | None = None,
 ) -> tuple[np.ndarray, np.ndarray, list[BasinSample]]:
     """A 2-D slice: an ``n x n`` grid over coordinates ``axes`` (indices into ``[I, y,
-    y_dot]``) within ``+-extent``, the third coordinate 0. Returns the two grid vectors and
-    the samples (row-major, first axis slowest)."""
+    y_dot]``) within ``+-extent`` (two half-widths, > 0), the third coordinate 0, each point
+    run by :func:`run_perturbation` with ``steps`` and ``v_tol`` on the periodic gait ``ref``;
+    ``on_sample`` is called with each sample. Returns the two grid vectors and the samples
+    (row-major, first axis slowest)."""
     a, b = axes
     if a == b or not {a, b} <= {0, 1, 2}:
         raise ValueError(f"axes must be two different indices of [I, y, y_dot], got {axes!r}")
