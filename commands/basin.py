@@ -69,7 +69,12 @@ SLICES = {"y_ydot": (1, 2), "I_y": (0, 1)}
 
 def configure(parser: argparse.ArgumentParser) -> None:
     """Add the arguments of ``roughwalk basin`` to ``parser``."""
-    parser.add_argument("--robot", choices=("paper", "classic"), default="paper", help="robot")
+    parser.add_argument(
+        "--robot",
+        choices=("paper",),
+        default="paper",
+        help="robot (the paper's; --v-tol is set for its gait)",
+    )
     parser.add_argument(
         "--radii",
         nargs="+",
