@@ -32,6 +32,8 @@ COMMANDS: dict[str, tuple[str, str]] = {
     "train": ("commands.train", "train an RL agent from a config"),
     "evaluate": ("commands.evaluate", "evaluate a policy on held-out terrain"),
     "compare": ("commands.compare", "baselines versus RL agents on every terrain, one table"),
+    "mfpt": ("commands.mfpt", "mean first-passage time (footsteps to failure) against roughness"),
+    "basin": ("commands.basin", "sampled basin of attraction of the reference controller"),
 }
 
 ENV_NAMESPACE = "roughwalk/"

@@ -1,0 +1,145 @@
+"""MFPT: the censored geometric estimator, Kaplan-Meier, the hazard check and walks on the
+native vector env."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from agents.mfpt import (
+    estimate_mfpt,
+    geometric_check,
+    kaplan_meier,
+    roughness_terrain,
+    run_walks,
+)
+
+
+def geometric_walks(
+    rng: np.random.Generator, p: float, walks: int, cap: int
+) -> tuple[np.ndarray, np.ndarray]:
+    """Walks of a process failing each footstep with probability ``p``, censored at ``cap``."""
+    T = rng.geometric(p, walks)  # footstep of the failure (1, 2, ...)
+    failed = T <= cap
+    return np.where(failed, T - 1, cap), failed
+
+
+def test_estimate_recovers_p_under_heavy_censoring():
+    rng = np.random.default_rng(0)
+    k, d = geometric_walks(rng, 0.05, 400, 30)  # about 21 % of the walks censored
+    assert 0.1 < 1 - d.mean() < 0.35
+    est = estimate_mfpt(k, d)
+    assert est.failures == int(d.sum())
+    assert est.exposure == int(k.sum() + d.sum())
+    # within 3 standard errors (sqrt(p / exposure) = 0.0027) of the truth
+    assert est.p_fail == pytest.approx(0.05, abs=0.0085)
+    assert est.p_interval[0] < est.p_fail < est.p_interval[1]
+    assert est.mfpt == pytest.approx(1 / est.p_fail)
+    assert est.mfpt_interval == pytest.approx((1 / est.p_interval[1], 1 / est.p_interval[0]))
+    # ignoring the censored walks would overstate the failure rate
+    naive = 1 / (k[d].mean() + 1)
+    assert naive > est.p_interval[1]
+
+
+def test_interval_coverage_near_nominal():
+    rng = np.random.default_rng(1)
+    p, hits, reps = 0.1, 0, 300
+    for _ in range(reps):
+        k, d = geometric_walks(rng, p, 30, 15)
+        lo, hi = estimate_mfpt(k, d).p_interval
+        hits += lo <= p <= hi
+    # Clopper-Pearson is conservative: at least the nominal 95 %, up to about 99 %
+    assert 0.92 <= hits / reps <= 0.995
+
+
+def test_all_censored_gives_a_lower_bound_only():
+    k = np.array([50, 50, 50, 50])
+    d = np.zeros(4, dtype=bool)
+    est = estimate_mfpt(k, d)
+    assert est.mfpt is None and est.p_fail == 0.0
+    assert math.isinf(est.mfpt_interval[1])
+    # exact two-sided 95 %: p_hi = 1 - 0.025^(1/200)
+    assert est.p_interval[1] == pytest.approx(1 - 0.025 ** (1 / 200), rel=1e-6)
+    assert est.lower_bound == pytest.approx(1 / est.p_interval[1])
+    assert est.to_dict()["mfpt_interval"][1] is None
+
+
+def test_kaplan_meier_on_a_small_example():
+    km = kaplan_meier([0, 1, 2, 2], [True, False, True, False])
+    assert km["step"].tolist() == [1, 2, 3]
+    assert km["at_risk"].tolist() == [4, 2, 1]
+    assert km["failures"].tolist() == [1, 0, 1]
+    assert km["survival"] == pytest.approx([0.75, 0.75, 0.0])
+
+
+def test_geometric_check_accepts_geometric_and_rejects_a_fixed_failure_step():
+    rng = np.random.default_rng(2)
+    k, d = geometric_walks(rng, 0.1, 300, 60)
+    assert geometric_check(k, d)["p_value"] > 0.01
+    # every walk fails at its second footstep (a deterministic fall, not memoryless)
+    fixed = geometric_check(np.full(30, 1), np.ones(30, dtype=bool))
+    assert fixed["p_value"] < 1e-6
+    assert [b["p_fail"] for b in fixed["blocks"]] == [0.0, 1.0]
+
+
+@pytest.mark.parametrize(
+    ("footsteps", "failed", "match"),
+    [
+        ([1, -1], [True, True], "footsteps"),
+        ([1, 2], [True], "same"),
+        ([1.5, 2], [True, False], "integers"),
+        ([1, 2], [1, 0], "booleans"),
+        ([0, 0], [False, False], "no footstep"),
+    ],
+)
+def test_estimator_rejects_bad_input(footsteps, failed, match):
+    with pytest.raises(ValueError, match=match):
+        estimate_mfpt(np.array(footsteps), np.array(failed))
+
+
+def test_estimator_rejects_bad_confidence():
+    with pytest.raises(ValueError, match="confidence"):
+        estimate_mfpt([3], [True], confidence=1.5)
+
+
+def test_roughness_terrain_spec():
+    spec = roughness_terrain(0.01, 50.0)
+    assert spec["kind"] == "blocks" and "seed" not in spec
+    assert spec["height_range"] == [-0.01, 0.01] and spec["length"] == 50.0
+    with pytest.raises(ValueError, match="roughness"):
+        roughness_terrain(-0.1, 10.0)
+
+
+def test_passive_walks_fail_and_do_not_depend_on_the_number_of_walkers():
+    a = run_walks("passive", 0.0, 3, walkers=1, step_cap=5, seed=7)
+    b = run_walks("passive", 0.0, 3, walkers=3, step_cap=5, seed=7)
+    assert a == b
+    assert [w.seed for w in a] == [7, 8, 9]
+    assert all(w.failed and w.footsteps < 5 for w in a)
+
+
+def test_pd_walks_are_censored_at_the_cap_and_reproducible():
+    a = run_walks("pd", 0.0, 2, walkers=2, step_cap=3, seed=0)
+    assert all(not w.failed and w.end == "cap" and w.footsteps == 3 for w in a)
+    assert all(w.distance > 0.2 for w in a)
+    b = run_walks("pd", 0.0, 2, walkers=1, step_cap=3, seed=0)
+    assert a == b
+
+
+@pytest.mark.parametrize(
+    ("kwargs", "match"),
+    [
+        ({"policy": "wander"}, "policy"),
+        ({"walks": 0}, "walks"),
+        ({"roughness": -0.01}, "roughness"),
+        ({"step_cap": 0}, "step_cap"),
+        ({"seed": -1}, "seed"),
+        ({"max_step_time": 0.0}, "max_step_time"),
+    ],
+)
+def test_run_walks_rejects_bad_arguments(kwargs, match):
+    args = {"policy": "passive", "roughness": 0.0, "walks": 1, **kwargs}
+    with pytest.raises(ValueError, match=match):
+        run_walks(args.pop("policy"), args.pop("roughness"), args.pop("walks"), **args)

@@ -1,0 +1,111 @@
+"""``roughwalk mfpt`` and ``roughwalk basin``: outputs, inputs checked before any work, and
+earlier results kept unless ``--overwrite``."""
+
+from __future__ import annotations
+
+import csv
+import json
+from pathlib import Path
+
+import pytest
+
+from commands.cli import main
+
+
+def _error_line(capsys: pytest.CaptureFixture, command: str) -> str:
+    err = capsys.readouterr().err
+    lines = err.strip().splitlines()
+    assert len(lines) == 1, err
+    assert lines[0].startswith(f"roughwalk {command}: error: ")
+    return lines[0]
+
+
+def test_mfpt_writes_results_and_stops_below_the_threshold(tmp_path: Path, capsys):
+    out = tmp_path / "m"
+    out.mkdir()
+    (out / "mfpt.json").write_text("an earlier result")
+    argv = ["mfpt", "--policy", "passive", "--roughness", "0", "0.01", "--walks", "3"]
+    argv += ["--walkers", "2", "--step-cap", "5", "--out", str(out), "--overwrite"]
+    assert main(argv) == 0
+    printed = capsys.readouterr().out
+    assert "passive" in printed and "MFPT" in printed
+    data = json.loads((out / "mfpt.json").read_text())
+    # the passive walker fails within two footsteps: MFPT < 10 at the first level, so it stops
+    assert len(data["levels"]) == 1
+    level = data["levels"][0]
+    assert level["estimate"]["failures"] == 3 and level["estimate"]["mfpt"] < 10
+    assert [w["seed"] for w in level["walks"]] == [0, 1, 2]
+    assert level["kaplan_meier"]["survival"][-1] == 0.0
+    rows = list(csv.DictReader((out / "mfpt.csv").open()))
+    assert len(rows) == 1 and rows[0]["policy"] == "passive" and rows[0]["walks"] == "3"
+    assert (out / "mfpt.png").stat().st_size > 0
+    assert (out / "mfpt_survival.png").stat().st_size > 0
+    names = ["mfpt.csv", "mfpt.json", "mfpt.png", "mfpt_survival.png"]
+    assert sorted(p.name for p in out.iterdir()) == names
+
+
+@pytest.mark.parametrize(
+    ("command", "name"), [("mfpt", "mfpt.csv"), ("basin", "basin_fraction.png")]
+)
+def test_an_earlier_result_is_kept(tmp_path: Path, capsys, command, name):
+    out = tmp_path / "r"
+    out.mkdir()
+    (out / name).write_text("an earlier result")
+    assert main([command, "--out", str(out)]) == 2
+    line = _error_line(capsys, command)
+    assert "earlier result" in line and "--overwrite" in line
+    assert (out / name).read_text() == "an earlier result"
+    assert [p.name for p in out.iterdir()] == [name]
+
+
+@pytest.mark.parametrize(
+    ("args", "match"),
+    [
+        (["--walks", "0"], "--walks"),
+        (["--roughness", "0.02", "0.01"], "--roughness"),
+        (["--roughness", "-0.01"], "--roughness"),
+        (["--policy", "wander"], "--policy"),
+        (["--step-cap", "x"], "--step-cap"),
+        (["--confidence", "1"], "--confidence"),
+        (["--env", "roughwalk/Nope-v0"], "--env"),
+    ],
+)
+def test_mfpt_bad_input_is_one_line_exit_2(tmp_path: Path, capsys, args, match):
+    out = tmp_path / "m"
+    assert main(["mfpt", *args, "--out", str(out)]) == 2
+    assert match in _error_line(capsys, "mfpt")
+    assert not out.exists()
+
+
+def test_basin_writes_results(tmp_path: Path, capsys):
+    out = tmp_path / "b"
+    argv = ["basin", "--radii", "0.1", "0.2", "--per-radius", "2", "--steps", "2"]
+    assert main([*argv, "--slices", "2", "--out", str(out)]) == 0
+    printed = capsys.readouterr().out
+    assert "certified level set" in printed and "r =  0.100" in printed
+    data = json.loads((out / "basin.json").read_text())
+    assert [r["starts"] + r["no_state"] for r in data["fractions"]] == [2, 2]
+    assert data["level_set"]["selection"] == 2 and data["level_set"]["certification"] == 2
+    assert len(data["samples"]) == 4 + 2 * 4
+    rows = list(csv.DictReader((out / "basin.csv").open()))
+    assert {r["kind"] for r in rows} == {"shell", "slice y_ydot", "slice I_y"}
+    for name in ("basin_fraction.png", "basin_slice_y_ydot.png", "basin_slice_I_y.png"):
+        assert (out / name).stat().st_size > 0
+
+
+@pytest.mark.parametrize(
+    ("args", "match"),
+    [
+        (["--radii", "1", "0.5"], "--radii"),
+        (["--radii", "0"], "--radii"),
+        (["--per-radius", "0"], "--per-radius"),
+        (["--steps", "-1"], "--steps"),
+        (["--v-tol", "0"], "--v-tol"),
+        (["--robot", "giant"], "--robot"),
+    ],
+)
+def test_basin_bad_input_is_one_line_exit_2(tmp_path: Path, capsys, args, match):
+    out = tmp_path / "b"
+    assert main(["basin", *args, "--out", str(out)]) == 2
+    assert match in _error_line(capsys, "basin")
+    assert not out.exists()

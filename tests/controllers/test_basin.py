@@ -1,0 +1,129 @@
+"""Basin of attraction of the reference controller around the periodic gait."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from controllers.basin import (
+    NO_STATE,
+    BasinSample,
+    certified_level,
+    converged_fractions,
+    periodic_reference,
+    perturbed_state,
+    run_perturbation,
+    sample_basin,
+    slice_grid,
+)
+
+
+@pytest.fixture(scope="module")
+def ref():
+    return periodic_reference("paper")
+
+
+def test_reference_matrix_and_unperturbed_state(ref):
+    assert ref.P == pytest.approx(ref.P.T)
+    assert np.all(np.linalg.eigvalsh(ref.P) > 0)
+    x = perturbed_state(ref, [0.0, 0.0, 0.0])
+    assert x == pytest.approx(np.concatenate([ref.gait.q, ref.gait.qd]), abs=1e-9)
+    z = np.array([0.05, -0.02, 0.1])
+    assert ref.model.coords(perturbed_state(ref, z)) == pytest.approx(z, abs=1e-9)
+
+
+def test_zero_perturbation_converges(ref):
+    s = run_perturbation(ref, [0.0, 0.0, 0.0], steps=16)
+    assert s.converged and s.end == "converged" and s.footsteps == 16
+    assert s.V0 == 0.0 and s.V_end < 0.005
+
+
+def test_huge_perturbations_fail_or_have_no_state(ref):
+    # 5 rad^2/s^2 more theta_dot^2 (2.3 instead of 0.84 rad/s): the walker trips at once
+    s = run_perturbation(ref, [5.0, 0.0, 0.0], steps=4)
+    assert not s.converged and s.end == "trip" and s.footsteps == 0
+    # theta_dot^2 + I <= 0: no such state
+    none = run_perturbation(ref, [-10.0, 0.0, 0.0], steps=4)
+    assert none.end == NO_STATE and none.footsteps == 0
+
+
+def test_sampled_perturbations_lie_on_their_ellipsoid(ref):
+    samples = sample_basin(ref, [0.05, 0.1], per_radius=2, seed=3, steps=1)
+    assert [s.V0 for s in samples] == [0.05**2, 0.05**2, 0.1**2, 0.1**2]
+    z = np.array([s.z for s in samples])
+    assert np.einsum("ij,jk,ik->i", z, ref.P, z) == pytest.approx([s.V0 for s in samples])
+    assert sample_basin(ref, [0.05, 0.1], per_radius=2, seed=3, steps=1) == samples
+
+
+def _sample(V0: float, converged: bool, end: str | None = None) -> BasinSample:
+    return BasinSample(
+        (0.0, 0.0, 0.0),
+        V0,
+        converged,
+        4,
+        0.0,
+        end or ("converged" if converged else "fall"),
+        0,
+    )
+
+
+def test_converged_fractions_with_wilson_intervals():
+    samples = [_sample(1.0, i < 8) for i in range(20)] + [_sample(4.0, True)] * 3
+    samples.append(_sample(4.0, False, NO_STATE))
+    rows = converged_fractions(samples)
+    assert [r["r"] for r in rows] == [1.0, 2.0]
+    assert rows[0]["converged"] == 8 and rows[0]["starts"] == 20
+    # 8/20: 21.9-61.3 % (Wilson, 95 %)
+    assert (rows[0]["low"], rows[0]["high"]) == pytest.approx((0.2188, 0.6134), abs=1e-4)
+    assert rows[1]["starts"] == 3 and rows[1]["no_state"] == 1 and rows[1]["fraction"] == 1.0
+
+
+def test_certified_level_with_holdout():
+    V = np.arange(1.0, 21.0)  # 20 samples, V = 1 .. 20
+    failed = V >= 15  # every start with V >= 15 fails; selection: even indices (V odd)
+    level = certified_level(V, failed)
+    assert level.rho == 15.0 and level.bounded_by_failure
+    assert level.selection == 10 and level.certification == 10
+    # held-out samples inside V < 15: V = 2, 4, ..., 14
+    assert level.inside == 7 and level.failures_inside == 0
+    assert level.bound == pytest.approx(1 - 0.05 ** (1 / 7))
+    assert level.contains(14.9) and not level.contains(15.0)
+
+
+def test_certified_level_counts_held_out_failures_and_unbounded_case():
+    V = np.array([1.0, 0.5, 3.0, 2.0, 5.0, 4.0])
+    failed = np.array([False, True, False, False, True, False])
+    level = certified_level(V, failed)  # selection V = 1, 3, 5 (5 failed): rho = 5
+    assert level.rho == 5.0 and level.inside == 3 and level.failures_inside == 1
+    assert 0 < level.bound < 1
+    none = certified_level(V, np.zeros(6, dtype=bool))
+    assert not none.bounded_by_failure and none.rho == 5.0 and none.contains(5.0)
+    assert none.inside == 3
+    whole = certified_level(V, failed, holdout=False)
+    assert whole.rho == 0.5 and whole.inside == 0 and whole.bound == 1.0
+
+
+@pytest.mark.parametrize(
+    ("V", "failed", "match"),
+    [
+        ([1.0], [False], "length"),
+        ([1.0, -1.0], [False, False], ">= 0"),
+        ([1.0, 2.0], [1], "same length"),
+    ],
+)
+def test_certified_level_rejects_bad_input(V, failed, match):
+    with pytest.raises(ValueError, match=match):
+        certified_level(V, failed)
+
+
+def test_run_perturbation_and_slice_reject_bad_input(ref):
+    with pytest.raises(ValueError, match="z must be"):
+        run_perturbation(ref, [0.0, math.nan, 0.0])
+    with pytest.raises(ValueError, match="steps"):
+        run_perturbation(ref, [0.0, 0.0, 0.0], steps=0)
+    with pytest.raises(ValueError, match="axes"):
+        slice_grid(ref, (1, 1), (0.1, 0.1), 3)
+    with pytest.raises(ValueError, match="radii"):
+        sample_basin(ref, [0.0], 2)
