@@ -53,6 +53,12 @@ class ReferencePolicy:
         record_history: keep per-tick ``t, q_meas, x_hat, u, stance_leg, nominal`` in
             :attr:`history` (nominal: ``q1, q1d, q2d`` of the current step at the estimated
             phase).
+        localise: correct the stance foot at each touchdown from the terrain scan matched
+            against the map (:class:`SensorStateEstimator`).
+        mapping: plan on a map built from the terrain scans as the robot walks, never reading
+            the true course (:class:`SensorStateEstimator`).
+        odometry_error: relative standard deviation of a dead-reckoned step length (the
+            localisation's process noise), >= 0.
         controller_kwargs: passed to the controller class (``kp``, ``kd`` for :class:`PDPolicy`).
     """
 
@@ -67,9 +73,14 @@ class ReferencePolicy:
         settle_time: float = 0.1,
         initial_velocity: tuple[float, float] | None = None,
         record_history: bool = False,
+        localise: bool = False,
+        mapping: bool = False,
+        odometry_error: float = 0.02,
         **controller_kwargs: Any,
     ):
-        est = self.estimator = SensorStateEstimator(env, eps, initial_velocity)
+        est = self.estimator = SensorStateEstimator(
+            env, eps, initial_velocity, localise, mapping, odometry_error
+        )
         self.robot, self.u_max = est.robot, est.u_max
         if config is None:
             config = ControllerConfig()
@@ -160,6 +171,8 @@ class ReferencePolicy:
                 terrain=est.terrain,
             )
         if event == IMPACT:
+            if est.map is not None:  # the map grew with the new scan
+                self.controller.terrain = est.terrain
             self.diagnostics["footsteps"] += 1
             self.diagnostics["touchdowns_located"] = est.touchdowns_located
             self.diagnostics["touchdowns_guessed"] = est.touchdowns_guessed

@@ -1,0 +1,157 @@
+"""A terrain map built from the scanner's noisy heights as the robot walks.
+
+Every scan (heights relative to the stance foot at known offsets ahead of it) is placed at the
+estimated stance foot and fused into cells of a fixed width (the mean of the readings that fell
+in a cell). The fused profile is split into level blocks: a new block starts where a cell's
+height differs from the running mean of the current block by more than ``jump`` and the next
+cell agrees with it (one stray reading does not make a block); a block supported by fewer than
+``min_samples`` readings joins the neighbour nearest in height. Between two blocks a vertical
+face is placed half-way between their last and first scanned points. Ahead of the last scanned
+point the ground is taken level at the last block's height, behind the first one at the first
+block's (the planner's far steps are replanned once scanned). The result is a
+:class:`envs.physics.terrain.Terrain` (``kind: points``), the form the planner's
+:class:`controllers.planner.footholds.TerrainMap` takes.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from envs.physics.terrain import Terrain
+
+__all__ = ["ScanMap"]
+
+_EXTEND = 5.0  # level ground assumed beyond the scanned stretch [m]
+
+
+class ScanMap:
+    """Terrain map fused from terrain scans.
+
+    Args:
+        cell: width of a fusion cell [m], > 0.
+        jump: least height difference between two blocks [m], > 0 (a few times the scanner's
+            noise: smaller steps are merged into one level block).
+        min_samples: readings a block needs to stand on its own, integer >= 1.
+    """
+
+    def __init__(self, cell: float = 0.005, jump: float = 0.003, min_samples: int = 2) -> None:
+        if not (math.isfinite(cell) and cell > 0):
+            raise ValueError(f"mapping cell = {cell!r} out of range; allowed: > 0 m")
+        if not (math.isfinite(jump) and jump > 0):
+            raise ValueError(f"mapping jump = {jump!r} out of range; allowed: > 0 m")
+        if isinstance(min_samples, bool) or int(min_samples) != min_samples or min_samples < 1:
+            raise ValueError(f"mapping min_samples = {min_samples!r}; allowed: integer >= 1")
+        self.cell = float(cell)
+        self.jump = float(jump)
+        self.min_samples = int(min_samples)
+        self.reset()
+
+    def reset(self) -> None:
+        """Forget every reading."""
+        self._sum: dict[int, float] = {}
+        self._weight: dict[int, float] = {}
+        self._count: dict[int, int] = {}
+        self._terrain: Terrain | None = None
+        self.x_min = math.inf
+        self.x_max = -math.inf
+
+    def add(self, xs: np.ndarray, heights: np.ndarray, weight: float = 1.0) -> None:
+        """Fuse readings ``heights`` [m] at positions ``xs`` [m] (absolute, map frame), each
+        weighing ``weight`` (> 0; the number of readings averaged in it); non-finite readings
+        are skipped."""
+        if not (math.isfinite(weight) and weight > 0):
+            raise ValueError(f"weight = {weight!r} out of range; allowed: > 0")
+        x = np.asarray(xs, dtype=np.float64).reshape(-1)
+        h = np.asarray(heights, dtype=np.float64).reshape(-1)
+        if x.shape != h.shape:
+            raise ValueError(f"xs and heights must have the same length, got {x.size}, {h.size}")
+        ok = np.isfinite(x) & np.isfinite(h)
+        for xi, hi in zip(x[ok], h[ok], strict=True):
+            k = int(math.floor(xi / self.cell))
+            self._sum[k] = self._sum.get(k, 0.0) + float(hi) * weight
+            self._weight[k] = self._weight.get(k, 0.0) + weight
+            self._count[k] = self._count.get(k, 0) + 1
+        if ok.any():
+            self.x_min = min(self.x_min, float(x[ok].min()))
+            self.x_max = max(self.x_max, float(x[ok].max()))
+            self._terrain = None
+
+    def add_scan(
+        self, foot: tuple[float, float], offsets: np.ndarray, scan: np.ndarray, weight: float = 1.0
+    ) -> None:
+        """Fuse one scan: ``scan[k]`` [m] relative to the stance foot ``foot = (x, y)`` [m] at
+        ``x + offsets[k]``, weighing ``weight`` (the readings averaged in it)."""
+        x = foot[0] + np.asarray(offsets, dtype=np.float64)
+        self.add(x, foot[1] + np.asarray(scan, dtype=np.float64), weight)
+
+    def known(self, xs: np.ndarray) -> np.ndarray:
+        """Where the map is scanned: ``x_min <= xs <= x_max`` (boolean, the shape of ``xs``)."""
+        x = np.asarray(xs, dtype=np.float64)
+        return (x >= self.x_min) & (x <= self.x_max)
+
+    def cells(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """The fused cells in order: centres [m], mean heights [m], weights, scan counts."""
+        keys = sorted(self._count)
+        w = np.array([self._weight[k] for k in keys], dtype=np.float64)
+        cnt = np.array([self._count[k] for k in keys], dtype=np.int64)
+        mean = np.array([self._sum[k] for k in keys], dtype=np.float64) / np.maximum(w, 1e-300)
+        return (np.array(keys, dtype=np.float64) + 0.5) * self.cell, mean, w, cnt
+
+    def blocks(self) -> list[tuple[float, float, float]]:
+        """Level blocks ``(x_first, x_last, height)`` [m]: first and last scanned cell centres
+        and the mean height, in order of x."""
+        x, h, n, cnt = self.cells()
+        if x.size == 0:
+            return []
+        groups: list[list[int]] = [[0]]
+        for i in range(1, x.size):
+            g = groups[-1]
+            mean = np.average(h[g], weights=n[g])
+            far = abs(h[i] - mean) > self.jump
+            # the next cell must confirm a new level (a single stray reading does not)
+            confirmed = i + 1 >= x.size or abs(h[i + 1] - h[i]) <= self.jump
+            if far and confirmed:
+                groups.append([i])
+            else:
+                g.append(i)
+        merged = True
+        while merged and len(groups) > 1:
+            merged = False
+            for j, g in enumerate(groups):
+                if cnt[g].sum() >= self.min_samples:
+                    continue
+                hj = np.average(h[g], weights=n[g])
+                nb = [k for k in (j - 1, j + 1) if 0 <= k < len(groups)]
+                k = min(nb, key=lambda k: abs(np.average(h[groups[k]], weights=n[groups[k]]) - hj))
+                lo, hi = min(j, k), max(j, k)
+                groups[lo : hi + 1] = [sorted(groups[lo] + groups[hi])]
+                merged = True
+                break
+        return [
+            (float(x[g[0]]), float(x[g[-1]]), float(np.average(h[g], weights=n[g]))) for g in groups
+        ]
+
+    def terrain(self) -> Terrain:
+        """The map as a :class:`Terrain`: level blocks, faces half-way between them, level
+        ground beyond the scanned stretch.
+
+        Raises:
+            ValueError: nothing has been scanned yet.
+        """
+        if self._terrain is not None:
+            return self._terrain
+        b = self.blocks()
+        if not b:
+            raise ValueError("the terrain map has no readings yet")
+        px = [b[0][0] - _EXTEND]
+        py = [b[0][2]]
+        for (_, x1, h1), (x0, _, h0) in zip(b[:-1], b[1:], strict=True):
+            xm = 0.5 * (x1 + x0)
+            px += [xm, xm]
+            py += [h1, h0]
+        px.append(b[-1][1] + _EXTEND)
+        py.append(b[-1][2])
+        self._terrain = Terrain.from_points(px, py)
+        return self._terrain
