@@ -124,6 +124,11 @@ class SensorStateEstimator:
             raise ValueError(
                 "localise and mapping read the terrain scan: the env needs sensors.scan_count >= 2"
             )
+        if self.localise and self.mapping:
+            raise ValueError(
+                "localise and mapping cannot be combined yet: a map built from the scans is in "
+                "the frame of the dead-reckoned foot (choose one)"
+            )
         self.localiser: ScanLocaliser | None = None
         self.map: ScanMap | None = None
         if self.localise:
@@ -264,6 +269,17 @@ class SensorStateEstimator:
         self.observer.q_last = q_meas.copy()
         self.stance_foot = self._locate(float(fx))
 
+    def refresh_map(self) -> None:
+        """Fuse the scans averaged since the last touchdown into the map now (``mapping``; the
+        first stance's map otherwise rests on one noisy scan until the first touchdown)."""
+        if self.map is None or self._scan_n == 0:
+            return
+        self._add_scan(self.stance_foot, self._scan_sum / self._scan_n, self._scan_n)
+        self._scan_sum[:] = 0.0
+        self._scan_n = 0
+        self.terrain = self.map.terrain()
+        self._tx, self._ty = self.terrain.arrays()
+
     def _add_scan(self, foot: tuple[float, float], scan: np.ndarray, readings: int) -> None:
         """Fuse ``scan`` (the mean of ``readings`` readings) taken from the stance foot
         ``foot`` [m] into the map."""
@@ -275,8 +291,8 @@ class SensorStateEstimator:
         scans (``localise``: the mean scan over the last stance refines the last foothold,
         the new scan the new one) and fused into the map (``mapping``)."""
         xs, ys = self.stance_foot
-        n = min(self._scan_n, _MAX_READINGS)
-        mean_scan = self._scan_sum / max(self._scan_n, 1)
+        n = max(min(self._scan_n, _MAX_READINGS), 1)
+        mean_scan = self._scan_sum / self._scan_n if self._scan_n else self.scan
         self._scan_sum[:] = self.scan
         self._scan_n = 1
         loc = self.localiser

@@ -180,6 +180,9 @@ class ReferencePolicy:
             self._note_fallback()
         if event != START and not self._settled and est.t >= self.settle_time - 1e-12:
             self._settled = True
+            if est.map is not None:  # the first scans, averaged, before the first replan
+                est.refresh_map()
+                self.controller.terrain = est.terrain
             self.controller.replan(x[:2].copy(), x[2:].copy())
             self._note_fallback()
         u = self.controller.control(x[:2], x[2:])
