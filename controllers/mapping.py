@@ -5,11 +5,9 @@ estimated stance foot and fused into cells of a fixed width (the mean of the rea
 in a cell). The fused profile is split into level blocks: a new block starts where a cell's
 height differs from the running mean of the current block by more than ``jump`` and the next
 cell agrees with it (one stray reading does not make a block); a block supported by fewer than
-``min_samples`` scans joins the neighbour nearest in height. Where the edge between two blocks
-lies is known only to the gap between their last and first scanned points: the map fills the
-gap with a low bump (``bump`` above the higher block), so that the planner keeps its footholds
-out of the whole gap (a foothold keeps a margin from faces) and its swing foot clears the
-higher block across it; as more scans fall in the gap it narrows to one face. Ahead of the last scanned
+``min_samples`` scans joins the neighbour nearest in height. Between two blocks a vertical face
+is placed half-way between their last and first scanned points (the scans of successive
+footsteps fall at different places, so the gap narrows as the robot comes closer). Ahead of the last scanned
 point the ground is taken level at the last block's height, behind the first one at the first
 block's (the planner's far steps are replanned once scanned). The result is a
 :class:`envs.physics.terrain.Terrain` (``kind: points``), the form the planner's
@@ -37,19 +35,13 @@ class ScanMap:
         jump: least height difference between two blocks [m], > 0 (a few times the scanner's
             noise: smaller steps are merged into one level block).
         min_samples: scans a block needs to stand on its own, integer >= 1.
-        bump: height of the bump filling an edge's gap above the higher block [m], > 0.
     """
 
-    def __init__(
-        self, cell: float = 0.001, jump: float = 0.003, min_samples: int = 2, bump: float = 0.001
-    ) -> None:
+    def __init__(self, cell: float = 0.001, jump: float = 0.003, min_samples: int = 2) -> None:
         if not (math.isfinite(cell) and cell > 0):
             raise ValueError(f"mapping cell = {cell!r} out of range; allowed: > 0 m")
         if not (math.isfinite(jump) and jump > 0):
             raise ValueError(f"mapping jump = {jump!r} out of range; allowed: > 0 m")
-        if not (math.isfinite(bump) and bump > 0):
-            raise ValueError(f"mapping bump = {bump!r} out of range; allowed: > 0 m")
-        self.bump = float(bump)
         if isinstance(min_samples, bool) or int(min_samples) != min_samples or min_samples < 1:
             raise ValueError(f"mapping min_samples = {min_samples!r}; allowed: integer >= 1")
         self.cell = float(cell)
@@ -164,15 +156,9 @@ class ScanMap:
         px = [b[0][0] - _EXTEND]
         py = [b[0][2]]
         for (_, x1, h1), (x0, _, h0) in zip(b[:-1], b[1:], strict=True):
-            xa, xb = x1 + 0.5 * self.cell, x0 - 0.5 * self.cell
-            if xb - xa < 1.5 * self.cell:  # adjacent cells: the face between them
-                xm = 0.5 * (x1 + x0)
-                px += [xm, xm]
-                py += [h1, h0]
-            else:
-                top = max(h1, h0) + self.bump
-                px += [xa, xa, xb, xb]
-                py += [h1, top, top, h0]
+            xm = 0.5 * (x1 + x0)
+            px += [xm, xm]
+            py += [h1, h0]
         px.append(b[-1][1] + _EXTEND)
         py.append(b[-1][2])
         self._terrain = Terrain.from_points(px, py)
