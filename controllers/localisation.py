@@ -153,7 +153,7 @@ class ScanLocaliser:
         sigma = math.hypot(self.scan_sigma / math.sqrt(readings), map_sigma)
         m, var, b, n = self._match(x, sig0, s, sigma, height, known)
         shift = 0.0
-        if var is not None and var < v0 * (1.0 - 1e-6):
+        if var is not None and var < 0.99 * v0:  # below 1 %: the grid, not the scan
             # the scan's information as a measurement z +- sqrt(r) of the error
             r = 1.0 / (1.0 / var - 1.0 / v0)
             z = m + r * m / v0

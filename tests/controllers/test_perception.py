@@ -64,7 +64,7 @@ def test_flat_ground_gives_no_correction():
     for k in range(10):
         assert loc.predict(0.14) == 0.0
         res = loc.update(0.14 * (k + 1), scan(flat, 0.0, rng, 1), flat.height)
-        assert abs(res.shift) < 1e-12 and res.sigma == pytest.approx(res.sigma_prior)
+        assert abs(res.shift) < 1e-12 and res.sigma == res.sigma_prior
     assert loc.sigma > 0.002  # the uncertainty grows, the estimate stays
 
 
@@ -86,12 +86,14 @@ def test_map_from_scans_finds_the_block_edges():
         m.add_scan((x, float(BLOCKS.height(x))), OFFSETS, scan(BLOCKS, x, rng, 50), 50)
         x += 0.137
     terrain = m.terrain()
-    true = [f for f in BLOCKS.vertical_faces() if abs(f[2] - f[1]) > 0.004 and f[0] < 3.2]
+    every = [f[0] for f in BLOCKS.vertical_faces() if abs(f[2] - f[1]) > 1e-3]
+    true = [f for f in BLOCKS.vertical_faces() if abs(f[2] - f[1]) > 0.005 and f[0] < 3.2]
     faces = terrain.vertical_faces()
     assert len(true) >= 5
-    for xf, a, b in true:  # each true edge lies in a mapped edge (a face or a bump's gap)
-        near = [f[0] for f in faces if abs(f[0] - xf) < 0.03]
-        assert near and min(near) - 0.002 <= xf <= max(near) + 0.002
+    for xf, _, _ in faces:  # the scanner's noise makes no faces
+        assert min(abs(np.subtract(every, xf))) < 0.015
+    for xf, a, b in true:  # within half the gap between scanned points on either side
+        assert min(abs(f[0] - xf) for f in faces) < 0.015
         assert abs(terrain.height(xf - 0.03) - a) < 0.002
         assert abs(terrain.height(xf + 0.03) - b) < 0.002
 
