@@ -49,7 +49,6 @@ from .observer import (
 __all__ = ["IMPACT", "START", "TICK", "SensorStateEstimator"]
 
 _MAX_READINGS = 50  # scan readings averaged at most (their noise is not perfectly independent)
-_MAP_SIGMA = 1e-3  # height error of a cell of a map built from scans [m]
 
 #: what :meth:`SensorStateEstimator.update` reports about a tick
 START, TICK, IMPACT = "start", "tick", "impact"
@@ -289,33 +288,29 @@ class SensorStateEstimator:
     def _locate(self, fx: float) -> tuple[float, float]:
         """The new stance foot from the dead-reckoned foothold ``fx`` [m]: corrected by the
         scans (``localise``: the mean scan over the last stance refines the last foothold,
-        the new scan the new one) and fused into the map (``mapping``)."""
+        the new scan the new one) or fused into the map (``mapping``)."""
         xs, ys = self.stance_foot
         n = max(min(self._scan_n, _MAX_READINGS), 1)
         mean_scan = self._scan_sum / self._scan_n if self._scan_n else self.scan
         self._scan_sum[:] = self.scan
         self._scan_n = 1
         loc = self.localiser
-        known = self.map.known if self.map is not None else None
-        map_sigma = _MAP_SIGMA if self.map is not None else 0.0
         if loc is not None:
-            res = loc.update(xs, mean_scan, self.terrain.height, known, n, map_sigma)
-            fx += res.shift
-            xs += res.shift
-        if self.map is not None:
-            self._add_scan((xs, ys), mean_scan, n)
-            self.terrain = self.map.terrain()
-        fy = float(self.terrain.height(fx))
-        if loc is not None:
-            fx += loc.predict(fx - xs)
-            res = loc.update(fx, self.scan, self.terrain.height, known, 1, map_sigma)
+            shift = loc.update(xs, mean_scan, self.terrain.height, readings=n).shift
+            fx += shift
+            fx += loc.predict(fx - xs - shift)
+            res = loc.update(fx, self.scan, self.terrain.height)
             self.corrections.append(res)
             fx += res.shift
-            fy = float(self.terrain.height(fx))
-            if self.map is not None and math.isfinite(res.height):
-                fy = res.height  # the foot's height that fits the scan to the map
+            return (fx, float(self.terrain.height(fx)))
         if self.map is not None:
+            self._add_scan((xs, ys), mean_scan, n)
+            # the vertical offset that fits the new scan to the map (the contact's height)
+            s = np.where(np.abs(self.scan) < self._scan_range, self.scan, np.nan)
+            fy = self.map.foot_height(fx, self.offsets, s)
+            self.map.add([fx], [fy])  # the foothold is a reading of the ground too
             self._add_scan((fx, fy), self.scan, 1)
             self.terrain = self.map.terrain()
             self._tx, self._ty = self.terrain.arrays()
-        return (fx, fy)
+            return (fx, fy)
+        return (fx, float(self.terrain.height(fx)))

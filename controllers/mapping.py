@@ -4,12 +4,13 @@ Every scan (heights relative to the stance foot at known offsets ahead of it) is
 estimated stance foot and fused into cells of a fixed width (the mean of the readings that fell
 in a cell). The fused profile is split into level blocks: a new block starts where a cell's
 height differs from the running mean of the current block by more than ``jump`` and the next
-cell agrees with it (one stray reading does not make a block); a block supported by fewer than
-``min_samples`` scans joins the neighbour nearest in height. Between two blocks a vertical face
-is placed half-way between their last and first scanned points (the scans of successive
-footsteps fall at different places, so the gap narrows as the robot comes closer). Ahead of the last scanned
-point the ground is taken level at the last block's height, behind the first one at the first
-block's (the planner's far steps are replanned once scanned). The result is a
+cell agrees with it (a stray cell, one reading across an edge say, belongs to no block); a
+block supported by fewer than ``min_samples`` scans joins the neighbour nearest in height.
+Between two blocks a vertical face is placed half-way between their last and first scanned
+points (footholds are readings too; scans of footsteps whose length is not a multiple of the
+scan spacing fall at different places, so the gap narrows as the robot comes closer). Ahead of
+the last scanned point the ground is taken level at the last block's height, behind the first
+one at the first block's (the planner's far steps are replanned once scanned). The result is a
 :class:`envs.physics.terrain.Terrain` (``kind: points``), the form the planner's
 :class:`controllers.planner.footholds.TerrainMap` takes.
 """
@@ -92,6 +93,18 @@ class ScanMap:
         x = np.asarray(xs, dtype=np.float64)
         return (x >= self.x_min) & (x <= self.x_max)
 
+    def foot_height(self, x: float, offsets: np.ndarray, scan: np.ndarray) -> float:
+        """Height [m] of a stance foot at ``x`` [m] that scanned ``scan`` [m] (relative to it) at
+        ``offsets`` [m]: the median of ``map - scan`` over the points the map already covers
+        (robust to an edge the dead-reckoned ``x`` misplaces), else the map's height at
+        ``x``."""
+        xs = x + np.asarray(offsets, dtype=np.float64)
+        s = np.asarray(scan, dtype=np.float64)
+        ok = self.known(xs) & np.isfinite(s)
+        if ok.sum() < 3:
+            return float(self.terrain().height(x))
+        return float(np.median(self.terrain().height(xs[ok]) - s[ok]))
+
     def cells(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
         """The fused cells in order: centres [m], mean heights [m], weights, scan counts."""
         keys = sorted(self._count)
@@ -113,10 +126,11 @@ class ScanMap:
             far = abs(h[i] - mean) > self.jump
             # the next cell must confirm a new level (a single stray reading does not)
             confirmed = i + 1 >= x.size or abs(h[i + 1] - h[i]) <= self.jump
-            if far and confirmed:
-                groups.append([i])
-            else:
+            if not far:
                 g.append(i)
+            elif confirmed:
+                groups.append([i])
+            # else: a stray cell (a reading across an edge, say) belongs to no block
         merged = True
         while merged and len(groups) > 1:
             merged = False
