@@ -7,8 +7,10 @@ height differs from the running mean of the current block by more than ``jump`` 
 cell agrees with it (a stray cell, one reading across an edge say, belongs to no block); a
 block supported by fewer than ``min_samples`` scans joins the neighbour nearest in height.
 Between two blocks a vertical face is placed half-way between their last and first scanned
-points (footholds are readings too; scans of footsteps whose length is not a multiple of the
-scan spacing fall at different places, so the gap narrows as the robot comes closer). Ahead of
+points, and both ends of that gap are marked as kinks of the profile, so that the planner keeps
+its footholds out of the whole gap (footholds are readings too; scans of footsteps whose length
+is not a multiple of the scan spacing fall at different places, so the gap narrows as the robot
+comes closer). Ahead of
 the last scanned point the ground is taken level at the last block's height, behind the first
 one at the first block's (the planner's far steps are replanned once scanned). The result is a
 :class:`envs.physics.terrain.Terrain` (``kind: points``), the form the planner's
@@ -26,6 +28,7 @@ from envs.physics.terrain import Terrain
 __all__ = ["ScanMap"]
 
 _EXTEND = 5.0  # level ground assumed beyond the scanned stretch [m]
+_TILT = 1e-5  # rise across an edge's gap that marks its ends as kinks [m]
 
 
 class ScanMap:
@@ -171,8 +174,14 @@ class ScanMap:
         py = [b[0][2]]
         for (_, x1, h1), (x0, _, h0) in zip(b[:-1], b[1:], strict=True):
             xm = 0.5 * (x1 + x0)
-            px += [xm, xm]
-            py += [h1, h0]
+            if x0 - x1 > 2.5 * self.cell:
+                # kinks (a 10 um tilt) at both ends of the gap: footholds keep their margin from
+                # the whole stretch where the edge may be
+                px += [x1, xm, xm, x0]
+                py += [h1, h1 + _TILT, h0 + _TILT, h0]
+            else:
+                px += [xm, xm]
+                py += [h1, h0]
         px.append(b[-1][1] + _EXTEND)
         py.append(b[-1][2])
         self._terrain = Terrain.from_points(px, py)
