@@ -127,3 +127,49 @@ def test_estimator_perception_options():
         SensorStateEstimator(env, localise=True)
     with pytest.raises(ValueError, match="cannot be combined"):
         SensorStateEstimator(gym.make("roughwalk/CompassGaitFlat-v0"), localise=True, mapping=True)
+
+
+def test_localised_policy_walks_a_block_course_with_a_shorter_leg():
+    """The policy is built for the nominal robot and walks one whose legs are 5 % shorter; a
+    second estimator, fed the same readings, dead-reckons without the scan."""
+    nominal = envs.RobotParams.from_preset("paper")
+    short = nominal.replace(l=0.95 * nominal.l, lc=0.95 * nominal.lc)
+    kwargs = {"max_episode_steps": 1600}  # 8 s
+    model_env = gym.make("roughwalk/CompassGaitRough-v0", **kwargs)
+    env = gym.make("roughwalk/CompassGaitRough-v0", robot=short, **kwargs)
+    policy = make_reference_policy(model_env, localise=True)
+    dead = SensorStateEstimator(model_env)
+    model_env.reset(seed=1_000_000)  # the same course: the policy's map
+    obs, info = env.reset(seed=1_000_000)
+    policy.reset()
+    u, errors, leg, done = 0.0, [], info["stance_leg"], False
+    while not done:
+        action = policy(obs)
+        dead.update(*dead.decode(obs), u)
+        u = float(action[0]) * policy.u_max
+        if leg != info["stance_leg"] or not errors:
+            leg = info["stance_leg"]
+            errors.append((policy.stance_foot[0], dead.stance_foot[0], info["stance_foot"][0]))
+        obs, _, terminated, truncated, info = env.step(action)
+        done = terminated or truncated
+    assert info["failure"] is None and info["footsteps"] >= 8
+    est, dr, true = np.array(errors).T
+    assert abs(dr[-1] - true[-1]) > 0.04  # m: about 7 mm a footstep
+    assert np.abs(est - true).max() < 0.02 and abs(est[-1] - true[-1]) < 0.01
+
+
+def test_localisation_keeps_the_nominal_estimate():
+    env = gym.make("roughwalk/CompassGaitStairs-v0")
+    policy = make_reference_policy(env, localise=True)
+    obs, info = env.reset(seed=4)
+    policy.reset()
+    feet = []
+    for _ in range(700):
+        action = policy(obs)
+        feet.append(abs(policy.stance_foot[0] - info["stance_foot"][0]))
+        obs, _, terminated, truncated, info = env.step(action)
+        assert not (terminated or truncated)
+    assert info["footsteps"] >= 4 and len(policy.estimator.corrections) == info["footsteps"]
+    # m: dead reckoning alone stays within 5 mm here; a scan that fits over an interval of
+    # shifts may move the foot by a few millimetres within it
+    assert max(feet) < 8e-3
