@@ -282,8 +282,11 @@ class SensorStateEstimator:
     def _add_scan(self, foot: tuple[float, float], scan: np.ndarray, readings: int) -> None:
         """Fuse ``scan`` (the mean of ``readings`` readings) taken from the stance foot
         ``foot`` [m] into the map."""
-        s = np.where(np.abs(scan) < self._scan_range, scan, np.nan)
-        self.map.add_scan(foot, self.offsets, s, readings)
+        self.map.add_scan(foot, self.offsets, self._clipped(scan), readings)
+
+    def _clipped(self, scan: np.ndarray) -> np.ndarray:
+        """``scan`` [m] with the readings clipped at the scanner's range replaced by NaN."""
+        return np.where(np.abs(scan) < self._scan_range, scan, np.nan)
 
     def _locate(self, fx: float) -> tuple[float, float]:
         """The new stance foot from the dead-reckoned foothold ``fx`` [m]: corrected by the
@@ -304,10 +307,11 @@ class SensorStateEstimator:
             fx += res.shift
             return (fx, float(self.terrain.height(fx)))
         if self.map is not None:
+            # the last foothold's height refitted to the map with the stance's mean scan
+            ys = self.map.foot_height(xs, self.offsets, self._clipped(mean_scan))
             self._add_scan((xs, ys), mean_scan, n)
             # the vertical offset that fits the new scan to the map (the contact's height)
-            s = np.where(np.abs(self.scan) < self._scan_range, self.scan, np.nan)
-            fy = self.map.foot_height(fx, self.offsets, s)
+            fy = self.map.foot_height(fx, self.offsets, self._clipped(self.scan))
             self.map.add([fx], [fy])  # the foothold is a reading of the ground too
             self._add_scan((fx, fy), self.scan, 1)
             self.terrain = self.map.terrain()
