@@ -54,6 +54,12 @@ _MAX_READINGS = 50  # scan readings averaged at most (their noise is not perfect
 START, TICK, IMPACT = "start", "tick", "impact"
 
 
+def _scan_sigma(sensors: Any) -> float:
+    """Standard deviation of one scanner reading [m]: its Gaussian noise and the quantisation's
+    uniform error."""
+    return math.hypot(sensors.scan_noise, sensors.scan_resolution / math.sqrt(12.0))
+
+
 class SensorStateEstimator:
     """Estimated state of a roughwalk env's walker from its sensor observations.
 
@@ -131,13 +137,11 @@ class SensorStateEstimator:
         self.localiser: ScanLocaliser | None = None
         self.map: ScanMap | None = None
         if self.localise:
-            # one reading: Gaussian noise and the quantisation's uniform error
-            sigma = math.hypot(sensors.scan_noise, sensors.scan_resolution / math.sqrt(12.0))
             self.localiser = ScanLocaliser(
-                self.offsets, max(sigma, 5e-4), sensors.scan_range, odometry_error
+                self.offsets, max(_scan_sigma(sensors), 5e-4), sensors.scan_range, odometry_error
             )
         if self.mapping:
-            self.map = ScanMap()
+            self.map = ScanMap(noise=_scan_sigma(sensors))
             self._scan_range = sensors.scan_range
         self.reset()
 

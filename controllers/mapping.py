@@ -36,18 +36,25 @@ class ScanMap:
 
     Args:
         cell: width of a fusion cell [m], > 0.
-        jump: least height difference between two blocks [m], > 0 (a few times the scanner's
-            noise: smaller steps are merged into one level block).
+        jump: least height difference between two blocks [m], > 0 (smaller steps are merged
+            into one level block).
         min_samples: scans a block needs to stand on its own, integer >= 1.
+        noise: standard deviation of one reading [m], >= 0: a cell of weight ``w`` starts a new
+            block only beyond ``max(jump, 3 noise / sqrt(w))`` from the current one.
     """
 
-    def __init__(self, cell: float = 0.001, jump: float = 0.003, min_samples: int = 2) -> None:
+    def __init__(
+        self, cell: float = 0.001, jump: float = 0.0015, min_samples: int = 2, noise: float = 0.002
+    ) -> None:
         if not (math.isfinite(cell) and cell > 0):
             raise ValueError(f"mapping cell = {cell!r} out of range; allowed: > 0 m")
         if not (math.isfinite(jump) and jump > 0):
             raise ValueError(f"mapping jump = {jump!r} out of range; allowed: > 0 m")
         if isinstance(min_samples, bool) or int(min_samples) != min_samples or min_samples < 1:
             raise ValueError(f"mapping min_samples = {min_samples!r}; allowed: integer >= 1")
+        if not (math.isfinite(noise) and noise >= 0):
+            raise ValueError(f"mapping noise = {noise!r} out of range; allowed: >= 0 m")
+        self.noise = float(noise)
         self.cell = float(cell)
         self.jump = float(jump)
         self.min_samples = int(min_samples)
@@ -122,13 +129,15 @@ class ScanMap:
         x, h, n, cnt = self.cells()
         if x.size == 0:
             return []
+        # a cell's height is uncertain by its readings' noise: a new level must stand out of it
+        tol = np.maximum(self.jump, 3.0 * self.noise / np.sqrt(n))
         groups: list[list[int]] = [[0]]
         for i in range(1, x.size):
             g = groups[-1]
             mean = np.average(h[g], weights=n[g])
-            far = abs(h[i] - mean) > self.jump
+            far = abs(h[i] - mean) > tol[i]
             # the next cell must confirm a new level (a single stray reading does not)
-            confirmed = i + 1 >= x.size or abs(h[i + 1] - h[i]) <= self.jump
+            confirmed = i + 1 >= x.size or abs(h[i + 1] - h[i]) <= max(tol[i], tol[i + 1])
             if not far:
                 g.append(i)
             elif confirmed:
