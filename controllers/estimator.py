@@ -124,6 +124,8 @@ class SensorStateEstimator:
         self._nsub_td = 16
         self.offsets = np.asarray(self.layout.scan_offsets, dtype=np.float64)
         self.localise, self.mapping = bool(localise), bool(mapping)
+        if not (math.isfinite(odometry_error) and odometry_error >= 0):
+            raise ValueError(f"odometry_error = {odometry_error!r} out of range; allowed: >= 0")
         sensors = getattr(getattr(u, "settings", None), "sensors", None)
         if (self.localise or self.mapping) and (sensors is None or self.offsets.size < 2):
             raise ValueError(

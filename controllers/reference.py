@@ -1,9 +1,10 @@
 """Reference policy for the Gymnasium environments: observer + planner + transverse controller.
 
 The policy sees what the paper's controller sees: the sensor observation (two encoders, two
-contact switches; the terrain scan is not needed) plus what the environment tells a controller
-about the world and the robot (``env.unwrapped``: ``robot``, ``terrain``, ``dt``, ``u_max``,
-``sensor_layout``). It never reads the true state.
+contact switches; the terrain scan with ``localise`` or ``mapping``) plus what the environment
+tells a controller about the world and the robot (``env.unwrapped``: ``robot``, ``terrain``,
+``dt``, ``u_max``, ``sensor_layout``; with ``mapping`` not the terrain: it plans on a map built
+from the scans). It never reads the true state.
 
 Every tick the state estimator (:class:`controllers.estimator.SensorStateEstimator`: encoders
 and contact switches decoded into ``q`` and the stance leg, the high-gain observer, touchdowns
@@ -123,7 +124,7 @@ class ReferencePolicy:
 
     @property
     def terrain(self) -> Any:
-        """The terrain map of the episode (the env's course)."""
+        """The terrain map of the episode (the env's course, or the map built from the scans)."""
         return self.estimator.terrain
 
     def applied(self, action: Any) -> None:

@@ -125,6 +125,8 @@ def test_estimator_perception_options():
     env = gym.make("roughwalk/CompassGaitFlat-v0", sensors={"scan_count": 0})
     with pytest.raises(ValueError, match="scan_count"):
         SensorStateEstimator(env, localise=True)
+    with pytest.raises(ValueError, match="odometry_error"):
+        SensorStateEstimator(gym.make("roughwalk/CompassGaitFlat-v0"), odometry_error=-0.1)
     with pytest.raises(ValueError, match="cannot be combined"):
         SensorStateEstimator(gym.make("roughwalk/CompassGaitFlat-v0"), localise=True, mapping=True)
 
