@@ -10,6 +10,16 @@ terrain map by integrating the observer's model from the previous estimate
 (:func:`controllers.observer.predict_touchdown`); the impact map is applied to the estimate
 there and the stance foot moves to the located foothold (dead reckoning on the map).
 
+Perception (the loop of the paper's Figure 1 closed through the terrain scanner):
+
+- ``localise=True``: at each touchdown the dead-reckoned foothold is corrected by matching the
+  scan against the map (:class:`controllers.localisation.ScanLocaliser`), so a model error
+  (a leg a few per cent off) no longer makes the foot position drift step after step; on level
+  ground the scan carries no horizontal information and the correction is zero.
+- ``mapping=True``: the true course is never read; the map the touchdowns are located on (and
+  the planner plans on) is built from the scans as the robot walks
+  (:class:`controllers.mapping.ScanMap`), in a frame whose origin is the first stance foot.
+
 The reference policy (:mod:`controllers.reference`) and the RL observation wrapper
 (``agents.wrappers.EstimatedStateObservation``) share it, so learned and classical controllers
 see the same estimate.
@@ -26,6 +36,8 @@ import numpy as np
 from envs.physics.encoders import encoders_to_q, stance_from_contacts
 from envs.physics.terrain import Terrain
 
+from .localisation import LocalisationResult, ScanLocaliser
+from .mapping import ScanMap
 from .observer import (
     HighGainObserver,
     observer_impact,
@@ -36,8 +48,16 @@ from .observer import (
 
 __all__ = ["IMPACT", "START", "TICK", "SensorStateEstimator"]
 
+_MAX_READINGS = 50  # scan readings averaged at most (their noise is not perfectly independent)
+
 #: what :meth:`SensorStateEstimator.update` reports about a tick
 START, TICK, IMPACT = "start", "tick", "impact"
+
+
+def _scan_sigma(sensors: Any) -> float:
+    """Standard deviation of one scanner reading [m]: its Gaussian noise and the quantisation's
+    uniform error."""
+    return math.hypot(sensors.scan_noise, sensors.scan_resolution / math.sqrt(12.0))
 
 
 class SensorStateEstimator:
@@ -50,6 +70,12 @@ class SensorStateEstimator:
         initial_velocity: velocity guess ``(q1d, q2d)`` [rad/s] at the start of an episode;
             default: the environment's nominal start velocity (its configuration, not the
             episode's true state), else zero.
+        localise: correct the stance foot at each touchdown by matching the terrain scan against
+            the map (needs ``scan_count >= 2``).
+        mapping: plan on a map built from the scans (no access to the true course); the
+            origin of its frame is the first stance foot (heights relative to it).
+        odometry_error: standard deviation of a dead-reckoned step length, relative to the step
+            (localisation's process noise), >= 0.
 
     Attributes:
         x: the estimate ``[q1, q2, q1d, q2d]`` [rad, rad/s] (a view, updated in place).
@@ -59,6 +85,11 @@ class SensorStateEstimator:
         t: time since the start of the episode [s].
         touchdowns_located, touchdowns_guessed: touchdowns located inside their period, and
             those taken at the end of the period (none found by the model).
+        scan: the scanner's heights of the last decoded observation [m] (relative to the
+            stance foot).
+        corrections: per touchdown, the localisation's :class:`LocalisationResult` (empty
+            without ``localise``).
+        map: the :class:`ScanMap` being built (``mapping``), else None.
     """
 
     def __init__(
@@ -66,6 +97,9 @@ class SensorStateEstimator:
         env: gym.Env,
         eps: float = 0.02,
         initial_velocity: tuple[float, float] | None = None,
+        localise: bool = False,
+        mapping: bool = False,
+        odometry_error: float = 0.02,
     ) -> None:
         u = env.unwrapped
         for name in ("robot", "dt", "u_max", "sensor_layout"):
@@ -88,6 +122,29 @@ class SensorStateEstimator:
             initial_velocity = tuple(init.qd) if init is not None else (0.0, 0.0)
         self.initial_velocity = np.asarray(initial_velocity, dtype=np.float64)
         self._nsub_td = 16
+        self.offsets = np.asarray(self.layout.scan_offsets, dtype=np.float64)
+        self.localise, self.mapping = bool(localise), bool(mapping)
+        if not (math.isfinite(odometry_error) and odometry_error >= 0):
+            raise ValueError(f"odometry_error = {odometry_error!r} out of range; allowed: >= 0")
+        sensors = getattr(getattr(u, "settings", None), "sensors", None)
+        if (self.localise or self.mapping) and (sensors is None or self.offsets.size < 2):
+            raise ValueError(
+                "localise and mapping read the terrain scan: the env needs sensors.scan_count >= 2"
+            )
+        if self.localise and self.mapping:
+            raise ValueError(
+                "localise and mapping cannot be combined yet: a map built from the scans is in "
+                "the frame of the dead-reckoned foot (choose one)"
+            )
+        self.localiser: ScanLocaliser | None = None
+        self.map: ScanMap | None = None
+        if self.localise:
+            self.localiser = ScanLocaliser(
+                self.offsets, max(_scan_sigma(sensors), 5e-4), sensors.scan_range, odometry_error
+            )
+        if self.mapping:
+            self.map = ScanMap(noise=_scan_sigma(sensors))
+            self._scan_range = sensors.scan_range
         self.reset()
 
     def reset(self) -> None:
@@ -100,6 +157,14 @@ class SensorStateEstimator:
         self._tx, self._ty = self.terrain.arrays()
         self.touchdowns_located = 0
         self.touchdowns_guessed = 0
+        self.scan = np.zeros(self.offsets.size)
+        self._scan_sum = np.zeros(self.offsets.size)
+        self._scan_n = 0
+        self.corrections: list[LocalisationResult] = []
+        if self.localiser is not None:
+            self.localiser.reset()
+        if self.map is not None:
+            self.map.reset()
 
     @property
     def x(self) -> np.ndarray:
@@ -117,6 +182,7 @@ class SensorStateEstimator:
             raise ValueError(f"observation must be {self.layout.size} finite numbers")
         lay = self.layout
         leg = stance_from_contacts(o[lay.contact_a], o[lay.contact_b], self.stance_leg)
+        self.scan = o[lay.scan].copy()
         return np.array(encoders_to_q(o[lay.hip], o[lay.leg_a], leg)), leg
 
     def update(self, q: np.ndarray, leg: int, u: float) -> str:
@@ -129,12 +195,20 @@ class SensorStateEstimator:
             FloatingPointError: the estimate is no longer finite.
         """
         if not self.started:
-            terrain = getattr(self.env, "terrain", None)
-            self.terrain = terrain if isinstance(terrain, Terrain) else Terrain.flat()
+            if self.map is not None:
+                # the robot stands on level ground around its first foothold
+                self.map.add(np.linspace(-0.1, 0.0, 21), np.zeros(21))
+                self._add_scan((0.0, 0.0), self.scan, 1)
+                self.terrain = self.map.terrain()
+            else:
+                terrain = getattr(self.env, "terrain", None)
+                self.terrain = terrain if isinstance(terrain, Terrain) else Terrain.flat()
             self._tx, self._ty = self.terrain.arrays()
             self.stance_foot = (0.0, float(self.terrain.height(0.0)))
             self.stance_leg = leg
             self.observer.reset(q, self.initial_velocity)
+            self._scan_sum[:] = self.scan
+            self._scan_n = 1
             self.started = True
             return START
         self.t += self.dt
@@ -145,6 +219,8 @@ class SensorStateEstimator:
             event = IMPACT
         else:
             self.observer.update(q, u)
+            self._scan_sum += self.scan
+            self._scan_n += 1
         if not np.all(np.isfinite(self.observer.x)):
             raise FloatingPointError("non-finite observer estimate")
         return event
@@ -196,4 +272,55 @@ class SensorStateEstimator:
                 self.P, x, x[0], x[1], q_meas[0], q_meas[1], u, rest, self.observer.eps, nsub
             )
         self.observer.q_last = q_meas.copy()
-        self.stance_foot = (float(fx), float(self.terrain.height(float(fx))))
+        self.stance_foot = self._locate(float(fx))
+
+    def refresh_map(self) -> None:
+        """Fuse the scans averaged since the last touchdown into the map now (``mapping``; the
+        first stance's map otherwise rests on one noisy scan until the first touchdown)."""
+        if self.map is None or self._scan_n == 0:
+            return
+        self._add_scan(self.stance_foot, self._scan_sum / self._scan_n, self._scan_n)
+        self._scan_sum[:] = 0.0
+        self._scan_n = 0
+        self.terrain = self.map.terrain()
+        self._tx, self._ty = self.terrain.arrays()
+
+    def _add_scan(self, foot: tuple[float, float], scan: np.ndarray, readings: int) -> None:
+        """Fuse ``scan`` (the mean of ``readings`` readings) taken from the stance foot
+        ``foot`` [m] into the map."""
+        self.map.add_scan(foot, self.offsets, self._clipped(scan), readings)
+
+    def _clipped(self, scan: np.ndarray) -> np.ndarray:
+        """``scan`` [m] with the readings clipped at the scanner's range replaced by NaN."""
+        return np.where(np.abs(scan) < self._scan_range, scan, np.nan)
+
+    def _locate(self, fx: float) -> tuple[float, float]:
+        """The new stance foot from the dead-reckoned foothold ``fx`` [m]: corrected by the
+        scans (``localise``: the mean scan over the last stance refines the last foothold,
+        the new scan the new one) or fused into the map (``mapping``)."""
+        xs, ys = self.stance_foot
+        n = max(min(self._scan_n, _MAX_READINGS), 1)
+        mean_scan = self._scan_sum / self._scan_n if self._scan_n else self.scan
+        self._scan_sum[:] = self.scan
+        self._scan_n = 1
+        loc = self.localiser
+        if loc is not None:
+            shift = loc.update(xs, mean_scan, self.terrain.height, readings=n).shift
+            fx += shift
+            fx += loc.predict(fx - xs - shift)
+            res = loc.update(fx, self.scan, self.terrain.height)
+            self.corrections.append(res)
+            fx += res.shift
+            return (fx, float(self.terrain.height(fx)))
+        if self.map is not None:
+            # the last foothold's height refitted to the map with the stance's mean scan
+            ys = self.map.foot_height(xs, self.offsets, self._clipped(mean_scan))
+            self._add_scan((xs, ys), mean_scan, n)
+            # the vertical offset that fits the new scan to the map (the contact's height)
+            fy = self.map.foot_height(fx, self.offsets, self._clipped(self.scan))
+            self.map.add([fx], [fy])  # the foothold is a reading of the ground too
+            self._add_scan((fx, fy), self.scan, 1)
+            self.terrain = self.map.terrain()
+            self._tx, self._ty = self.terrain.arrays()
+            return (fx, fy)
+        return (fx, float(self.terrain.height(fx)))

@@ -1,9 +1,10 @@
 """Reference policy for the Gymnasium environments: observer + planner + transverse controller.
 
 The policy sees what the paper's controller sees: the sensor observation (two encoders, two
-contact switches; the terrain scan is not needed) plus what the environment tells a controller
-about the world and the robot (``env.unwrapped``: ``robot``, ``terrain``, ``dt``, ``u_max``,
-``sensor_layout``). It never reads the true state.
+contact switches; the terrain scan with ``localise`` or ``mapping``) plus what the environment
+tells a controller about the world and the robot (``env.unwrapped``: ``robot``, ``terrain``,
+``dt``, ``u_max``, ``sensor_layout``; with ``mapping`` not the terrain: it plans on a map built
+from the scans). It never reads the true state.
 
 Every tick the state estimator (:class:`controllers.estimator.SensorStateEstimator`: encoders
 and contact switches decoded into ``q`` and the stance leg, the high-gain observer, touchdowns
@@ -53,6 +54,12 @@ class ReferencePolicy:
         record_history: keep per-tick ``t, q_meas, x_hat, u, stance_leg, nominal`` in
             :attr:`history` (nominal: ``q1, q1d, q2d`` of the current step at the estimated
             phase).
+        localise: correct the stance foot at each touchdown from the terrain scan matched
+            against the map (:class:`SensorStateEstimator`).
+        mapping: plan on a map built from the terrain scans as the robot walks, never reading
+            the true course (:class:`SensorStateEstimator`).
+        odometry_error: relative standard deviation of a dead-reckoned step length (the
+            localisation's process noise), >= 0.
         controller_kwargs: passed to the controller class (``kp``, ``kd`` for :class:`PDPolicy`).
     """
 
@@ -67,9 +74,14 @@ class ReferencePolicy:
         settle_time: float = 0.1,
         initial_velocity: tuple[float, float] | None = None,
         record_history: bool = False,
+        localise: bool = False,
+        mapping: bool = False,
+        odometry_error: float = 0.02,
         **controller_kwargs: Any,
     ):
-        est = self.estimator = SensorStateEstimator(env, eps, initial_velocity)
+        est = self.estimator = SensorStateEstimator(
+            env, eps, initial_velocity, localise, mapping, odometry_error
+        )
         self.robot, self.u_max = est.robot, est.u_max
         if config is None:
             config = ControllerConfig()
@@ -112,7 +124,7 @@ class ReferencePolicy:
 
     @property
     def terrain(self) -> Any:
-        """The terrain map of the episode (the env's course)."""
+        """The terrain map of the episode (the env's course, or the map built from the scans)."""
         return self.estimator.terrain
 
     def applied(self, action: Any) -> None:
@@ -160,6 +172,8 @@ class ReferencePolicy:
                 terrain=est.terrain,
             )
         if event == IMPACT:
+            if est.map is not None:  # the map grew with the new scan
+                self.controller.terrain = est.terrain
             self.diagnostics["footsteps"] += 1
             self.diagnostics["touchdowns_located"] = est.touchdowns_located
             self.diagnostics["touchdowns_guessed"] = est.touchdowns_guessed
@@ -167,6 +181,9 @@ class ReferencePolicy:
             self._note_fallback()
         if event != START and not self._settled and est.t >= self.settle_time - 1e-12:
             self._settled = True
+            if est.map is not None:  # the first scans, averaged, before the first replan
+                est.refresh_map()
+                self.controller.terrain = est.terrain
             self.controller.replan(x[:2].copy(), x[2:].copy())
             self._note_fallback()
         u = self.controller.control(x[:2], x[2:])

@@ -1,0 +1,177 @@
+"""Perception: stance-foot localisation from the terrain scan, and maps built from the scans."""
+
+import gymnasium as gym
+import numpy as np
+import pytest
+
+import envs  # noqa: F401  (registers the ids)
+from controllers import make_reference_policy
+from controllers.estimator import SensorStateEstimator
+from controllers.localisation import ScanLocaliser
+from controllers.mapping import ScanMap
+from envs.physics.terrain import Terrain
+from envs.sensors import SensorConfig
+
+OFFSETS = SensorConfig().scan_offsets  # 0.05 ... 0.50 m ahead of the stance foot
+NOISE = 0.002  # m, the envs' scan noise
+BLOCKS = Terrain.random_blocks(7, start=0.3, length=6.0, width_range=(0.1, 0.3),
+                               height_range=(-0.0075, 0.0075))  # fmt: skip
+
+
+def scan(terrain, x, rng, readings):
+    """The mean of ``readings`` noisy, quantised scans from a foot at ``x`` [m]."""
+    exact = terrain.height(x + OFFSETS) - terrain.height(x)
+    noisy = exact + NOISE * rng.standard_normal((readings, OFFSETS.size))
+    return np.round(noisy / 1e-3).mean(axis=0) * 1e-3
+
+
+def walk(terrain, scale, localise, seed=0, steps=40, length=0.14):
+    """Estimated minus true stance-foot x [m] at each touchdown of a walk whose true steps are
+    ``scale`` times the dead-reckoned ones (a leg ``scale - 1`` off), with or without the
+    scan's corrections: the mean scan of each stance (50 readings), then the new one."""
+    rng = np.random.default_rng(seed)
+    loc = ScanLocaliser(OFFSETS, np.hypot(NOISE, 1e-3 / 12**0.5), 0.3)
+    true = est = 0.0
+    errors = []
+    for _ in range(steps):
+        if localise:
+            est += loc.update(est, scan(terrain, true, rng, 50), terrain.height, readings=50).shift
+        true += scale * length
+        est += length
+        if localise:
+            est += loc.predict(length)
+            est += loc.update(est, scan(terrain, true, rng, 1), terrain.height).shift
+        errors.append(est - true)
+    return np.array(errors)
+
+
+def test_drift_stays_bounded_under_a_leg_length_error():
+    dead = walk(BLOCKS, 0.95, localise=False)
+    loc = walk(BLOCKS, 0.95, localise=True)
+    assert abs(dead[-1]) > 0.25  # m: 7 mm a step, 40 steps
+    assert np.abs(loc).max() < 0.025 and np.abs(loc[-10:]).max() < 0.012
+
+
+def test_localisation_does_not_worsen_the_nominal_case():
+    errors = walk(BLOCKS, 1.0, localise=True)
+    assert np.abs(errors).max() < 0.006  # m
+
+
+def test_flat_ground_gives_no_correction():
+    loc = ScanLocaliser(OFFSETS, 0.002, 0.3)
+    flat = Terrain.flat()
+    rng = np.random.default_rng(1)
+    for k in range(10):
+        assert loc.predict(0.14) == 0.0
+        res = loc.update(0.14 * (k + 1), scan(flat, 0.0, rng, 1), flat.height)
+        assert abs(res.shift) < 1e-12 and res.sigma == res.sigma_prior
+    assert loc.sigma > 0.002  # the uncertainty grows, the estimate stays
+
+
+def test_localiser_bad_arguments():
+    with pytest.raises(ValueError, match="odometry_error"):
+        ScanLocaliser(OFFSETS, 0.002, 0.3, odometry_error=-1.0)
+    loc = ScanLocaliser(OFFSETS, 0.002, 0.3)
+    with pytest.raises(ValueError, match="10 heights"):
+        loc.update(0.0, np.zeros(3), Terrain.flat().height)
+    with pytest.raises(ValueError, match="readings"):
+        loc.update(0.0, np.zeros(10), Terrain.flat().height, readings=0)
+
+
+def test_map_from_scans_finds_the_block_edges():
+    rng = np.random.default_rng(2)
+    m = ScanMap()
+    x = 0.0
+    while x < 3.0:  # the mean scan of each stance, as the estimator fuses them
+        m.add_scan((x, float(BLOCKS.height(x))), OFFSETS, scan(BLOCKS, x, rng, 50), 50)
+        x += 0.137
+    terrain = m.terrain()
+    every = [f[0] for f in BLOCKS.vertical_faces() if abs(f[2] - f[1]) > 1e-3]
+    true = [f for f in BLOCKS.vertical_faces() if abs(f[2] - f[1]) > 0.005 and f[0] < 3.2]
+    faces = terrain.vertical_faces()
+    assert len(true) >= 5
+    for xf, _, _ in faces:  # the scanner's noise makes no faces
+        assert min(abs(np.subtract(every, xf))) < 0.015
+    for xf, a, b in true:  # within half the gap between scanned points on either side
+        assert min(abs(f[0] - xf) for f in faces) < 0.015
+        assert abs(terrain.height(xf - 0.03) - a) < 0.002
+        assert abs(terrain.height(xf + 0.03) - b) < 0.002
+
+
+def test_map_bad_arguments():
+    with pytest.raises(ValueError, match="cell"):
+        ScanMap(cell=0.0)
+    with pytest.raises(ValueError, match="no readings"):
+        ScanMap().terrain()
+
+
+def test_mapping_mode_walks_the_stairs_without_the_course():
+    env = gym.make("roughwalk/CompassGaitStairs-v0", max_episode_steps=1000)
+    policy = make_reference_policy(env, mapping=True)
+    obs, info = env.reset(seed=1_000_000)
+    env.unwrapped.terrain = None  # the policy must not need the true course
+    policy.reset()
+    done = False
+    while not done:
+        obs, _, terminated, truncated, info = env.step(policy(obs))
+        done = terminated or truncated
+    assert info["failure"] is None and info["distance"] > 0.8  # past both stairs
+    faces = [f for f in policy.terrain.vertical_faces() if f[2] - f[1] < -0.02]
+    assert [round(f[0], 1) for f in faces] == [0.4, 0.6]
+    assert [f[2] - f[1] for f in faces] == pytest.approx([-0.03, -0.03], abs=0.003)
+
+
+def test_estimator_perception_options():
+    env = gym.make("roughwalk/CompassGaitFlat-v0", sensors={"scan_count": 0})
+    with pytest.raises(ValueError, match="scan_count"):
+        SensorStateEstimator(env, localise=True)
+    with pytest.raises(ValueError, match="odometry_error"):
+        SensorStateEstimator(gym.make("roughwalk/CompassGaitFlat-v0"), odometry_error=-0.1)
+    with pytest.raises(ValueError, match="cannot be combined"):
+        SensorStateEstimator(gym.make("roughwalk/CompassGaitFlat-v0"), localise=True, mapping=True)
+
+
+def test_localised_policy_walks_a_block_course_with_a_shorter_leg():
+    """The policy is built for the nominal robot and walks one whose legs are 5 % shorter; a
+    second estimator, fed the same readings, dead-reckons without the scan."""
+    nominal = envs.RobotParams.from_preset("paper")
+    short = nominal.replace(l=0.95 * nominal.l, lc=0.95 * nominal.lc)
+    kwargs = {"max_episode_steps": 1600}  # 8 s
+    model_env = gym.make("roughwalk/CompassGaitRough-v0", **kwargs)
+    env = gym.make("roughwalk/CompassGaitRough-v0", robot=short, **kwargs)
+    policy = make_reference_policy(model_env, localise=True)
+    dead = SensorStateEstimator(model_env)
+    model_env.reset(seed=1_000_000)  # the same course: the policy's map
+    obs, info = env.reset(seed=1_000_000)
+    policy.reset()
+    u, errors, leg, done = 0.0, [], info["stance_leg"], False
+    while not done:
+        action = policy(obs)
+        dead.update(*dead.decode(obs), u)
+        u = float(action[0]) * policy.u_max
+        if leg != info["stance_leg"] or not errors:
+            leg = info["stance_leg"]
+            errors.append((policy.stance_foot[0], dead.stance_foot[0], info["stance_foot"][0]))
+        obs, _, terminated, truncated, info = env.step(action)
+        done = terminated or truncated
+    assert info["failure"] is None and info["footsteps"] >= 8
+    est, dr, true = np.array(errors).T
+    assert abs(dr[-1] - true[-1]) > 0.04  # m: about 7 mm a footstep
+    assert np.abs(est - true).max() < 0.02 and abs(est[-1] - true[-1]) < 0.01
+
+
+def test_localisation_keeps_the_nominal_estimate():
+    env = gym.make("roughwalk/CompassGaitStairs-v0")
+    policy = make_reference_policy(env, localise=True)
+    obs, info = env.reset(seed=4)
+    policy.reset()
+    feet = []
+    for _ in range(700):
+        action = policy(obs)
+        feet.append(abs(policy.stance_foot[0] - info["stance_foot"][0]))
+        obs, _, terminated, truncated, info = env.step(action)
+        assert not (terminated or truncated)
+    assert info["footsteps"] >= 4 and len(policy.estimator.corrections) == info["footsteps"]
+    # m: dead reckoning alone stays within 5 mm here; a scan that fits over an interval of
+    # shifts may move the foot by a few millimetres within it
+    assert max(feet) < 8e-3
