@@ -353,17 +353,30 @@ class TransverseController:
         self._start_step(np.asarray(q, float), np.asarray(qd, float), t, first=True)
 
     def on_impact(
-        self, q: np.ndarray, qd: np.ndarray, stance_foot: tuple[float, float], t: float = math.nan
+        self,
+        q: np.ndarray,
+        qd: np.ndarray,
+        stance_foot: tuple[float, float],
+        t: float = math.nan,
+        terrain: Terrain | dict | str | None = None,
     ) -> None:
         """A touchdown happened: ``(q, qd)`` is the post-impact state [rad, rad/s],
         ``stance_foot`` the new stance-foot position [m], ``t`` the impact time [s] (NaN if
-        unknown). Replans (or advances the fixed plan) and re-solves."""
+        unknown), ``terrain`` an updated terrain map (e.g. one built from the scans; default:
+        the current one). Replans (or advances the fixed plan) and re-solves."""
+        if terrain is not None:
+            self.terrain = as_terrain(terrain)
         self._stance = finite_pair("stance_foot", stance_foot, "m")
         self._start_step(np.asarray(q, float), np.asarray(qd, float), t, first=False)
 
-    def replan(self, q: np.ndarray, qd: np.ndarray) -> None:
+    def replan(
+        self, q: np.ndarray, qd: np.ndarray, terrain: Terrain | dict | str | None = None
+    ) -> None:
         """Replan the rest of the current step from the state ``(q, qd)`` (same stance foot),
-        e.g. once a velocity observer has converged; ignored when ``replan`` is False."""
+        e.g. once a velocity observer has converged, on ``terrain`` if given (an updated map;
+        default: the current one); ignored when ``replan`` is False."""
+        if terrain is not None:
+            self.terrain = as_terrain(terrain)
         if not self.config.replan or not self.records:
             return
         self._start_step(

@@ -172,19 +172,22 @@ class ReferencePolicy:
                 terrain=est.terrain,
             )
         if event == IMPACT:
-            if est.map is not None:  # the map grew with the new scan
-                self.controller.terrain = est.terrain
             self.diagnostics["footsteps"] += 1
             self.diagnostics["touchdowns_located"] = est.touchdowns_located
             self.diagnostics["touchdowns_guessed"] = est.touchdowns_guessed
-            self.controller.on_impact(x[:2].copy(), x[2:].copy(), est.stance_foot, t=est.t)
+            # with mapping, the map grew with the new scan
+            new_map = est.terrain if est.map is not None else None
+            self.controller.on_impact(
+                x[:2].copy(), x[2:].copy(), est.stance_foot, t=est.t, terrain=new_map
+            )
             self._note_fallback()
         if event != START and not self._settled and est.t >= self.settle_time - 1e-12:
             self._settled = True
+            new_map = None
             if est.map is not None:  # the first scans, averaged, before the first replan
                 est.refresh_map()
-                self.controller.terrain = est.terrain
-            self.controller.replan(x[:2].copy(), x[2:].copy())
+                new_map = est.terrain
+            self.controller.replan(x[:2].copy(), x[2:].copy(), terrain=new_map)
             self._note_fallback()
         u = self.controller.control(x[:2], x[2:])
         if self.record_history:
