@@ -32,6 +32,7 @@ COMMANDS: dict[str, tuple[str, str]] = {
     "train": ("commands.train", "train an RL agent from a config"),
     "evaluate": ("commands.evaluate", "evaluate a policy on held-out terrain"),
     "compare": ("commands.compare", "baselines versus RL agents on every terrain, one table"),
+    "sweep": ("commands.sweep", "a grid of policies x envs x held-out courses, with intervals"),
 }
 
 ENV_NAMESPACE = "roughwalk/"
