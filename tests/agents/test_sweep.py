@@ -166,7 +166,8 @@ def test_across_training_seeds():
     assert (pair["x"], pair["y"], pair["p_x_better"]) == ("good", "bad", 1.0)
     # no groups: no across-seeds part
     plain = spec_from_dict({"episodes": 20, "policies": ["pd"], "envs": envs})
-    assert "across_seeds" not in summarize_sweep(plain.cells(), fake_records(plain.cells()[0], 5, 20))
+    one = fake_records(plain.cells()[0], 5, 20)
+    assert "across_seeds" not in summarize_sweep(plain.cells(), one)
 
 
 def test_success_plot_has_one_curve_per_policy(tmp_path):
