@@ -16,6 +16,8 @@ from collections.abc import Iterable
 from pathlib import Path
 from typing import IO, Any
 
+import numpy as np
+
 from agents.runs import atomic_write_text, check_writable
 from agents.sweep.spec import SweepSpec
 
@@ -134,6 +136,13 @@ class ResultsFolder:
         return read_records(self.episodes_path)
 
 
+def _plain(value: Any) -> Any:
+    """JSON for the numpy values a record may hold (arrays, numpy scalars)."""
+    if isinstance(value, np.ndarray | np.generic):
+        return value.tolist()
+    raise TypeError(f"a record holds a {type(value).__name__}, which JSON cannot store")
+
+
 class RecordWriter:
     """Appends records to ``episodes.jsonl``, each line flushed to disk as it is written.
 
@@ -147,7 +156,7 @@ class RecordWriter:
     def write(self, records: Iterable[dict[str, Any]]) -> None:
         """Append ``records``, one JSON object per line."""
         for r in records:
-            self._fh.write(json.dumps(r, allow_nan=False) + "\n")
+            self._fh.write(json.dumps(r, allow_nan=False, default=_plain) + "\n")
         self._fh.flush()
         os.fsync(self._fh.fileno())
 
