@@ -3,6 +3,7 @@ the serial backend."""
 
 import pytest
 
+from agents.evaluate import evaluate
 from agents.sweep import read_records, run_sweep, spec_from_dict
 from agents.sweep.backends import init_ray
 from agents.sweep.store import EPISODES_FILE
@@ -32,6 +33,9 @@ def test_ray_and_serial_give_identical_records(local_ray, tmp_path):
             ],
         }
     )
+    # an evaluation in this process first, on the default BLAS threads: the sweep's records
+    # must not depend on what the process computed before (the planner's shared gaits)
+    evaluate("pd", spec.envs[0].id, episodes=1, env_kwargs=spec.envs[0].kwargs)
     serial = run_sweep(spec, tmp_path / "serial", plot=False)
     # one task per episode: the episodes of a cell run in different worker processes
     remote = run_sweep(spec, tmp_path / "ray", backend="ray", chunk=1, plot=False)

@@ -66,7 +66,7 @@ def test_only_the_module_of_the_command_run_is_imported():
         [sys.executable, "-c", code], capture_output=True, text=True, check=True
     ).stdout
     assert out.splitlines()[-1] == "['commands.cli', 'commands.passive']"
-    assert set(COMMANDS) == {"demo", "passive", "bench", "train", "evaluate", "compare"}
+    assert set(COMMANDS) == {"demo", "passive", "bench", "train", "evaluate", "compare", "sweep"}
 
 
 # ---------------------------------------------------------------- the error contract
