@@ -156,7 +156,7 @@ class RecordWriter:
     def write(self, records: Iterable[dict[str, Any]]) -> None:
         """Append ``records``, one JSON object per line."""
         for r in records:
-            self._fh.write(json.dumps(r, allow_nan=False, default=_plain) + "\n")
+            self._fh.write(json.dumps(r, default=_plain) + "\n")
         self._fh.flush()
         os.fsync(self._fh.fileno())
 
