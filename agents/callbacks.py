@@ -1,6 +1,7 @@
 """stable-baselines3 callbacks for roughwalk training runs: a progress bar to the steps the
-run will really end at, checkpoints and best models written all or nothing, and the held-out
-periodic evaluation, reported one line per evaluation."""
+run will really end at, checkpoints and best models written all or nothing, the held-out
+periodic evaluation, reported one line per evaluation, the critic warm-up of residual learning
+and the terrain curriculum's log."""
 
 from __future__ import annotations
 
@@ -168,3 +169,192 @@ class HeldOutEvalCallback(EvalCallback):
         if self.report:
             print(line, flush=True)
         return keep_going
+
+
+def actor_parameters(model: Any) -> list[Any]:
+    """The parameters that shape a model's actions: PPO and A2C: the policy branch of the MLP
+    extractor, ``action_net``, ``log_std`` and the (policy's) features extractor; SAC and TD3:
+    the actor. The others (value function, critics) are the critic's.
+
+    Args:
+        model: a stable-baselines3 PPO, A2C, SAC or TD3 model.
+    """
+    policy = model.policy
+    if hasattr(policy, "action_net"):
+        extractor = (
+            policy.features_extractor
+            if policy.share_features_extractor
+            else policy.pi_features_extractor
+        )
+        modules = [extractor, policy.mlp_extractor.policy_net, policy.action_net]
+        params = [p for m in modules for p in m.parameters()]
+        log_std = getattr(policy, "log_std", None)
+        return params + ([log_std] if log_std is not None else [])
+    if hasattr(policy, "actor"):
+        return list(policy.actor.parameters())
+    raise ValueError(f"actor_parameters: unsupported policy {type(policy).__name__}")
+
+
+class CriticWarmup(BaseCallback):
+    """Critic warm-up of residual learning (Silver et al. 2018): for the first ``steps`` env
+    steps of training the actor is frozen and only the critic learns, on the transitions of
+    the frozen policy (with ``agents.residual.init_policy``: the base policy's, plus the
+    configured exploration noise).
+
+    The actor's parameters (:func:`actor_parameters`) stop requiring gradients, so the
+    optimisers leave them (and their moments) untouched while the value function (PPO, A2C)
+    or the critics (SAC, TD3) learn as usual; SAC's learnt entropy coefficient is held at its
+    value too (restored after each of its optimiser's steps; its moments are cleared at the
+    end). The updates on data collected before step ``steps`` are critic-only: PPO's first
+    ``ceil(steps / (n_steps * n_envs))`` updates, SAC's updates up to that step. Logs
+    ``train/actor_frozen`` (1 during the warm-up).
+
+    Args:
+        steps: length of the warm-up [env steps, all envs together], >= 0.
+    """
+
+    def __init__(self, steps: int) -> None:
+        super().__init__()
+        if isinstance(steps, bool) or not isinstance(steps, int) or steps < 0:
+            raise ValueError(f"critic_warmup: must be an integer >= 0 (env steps), got {steps!r}")
+        self.steps = steps
+        self._frozen: list[Any] = []
+        self._hook: Any = None
+
+    @property
+    def active(self) -> bool:
+        """Whether the actor is frozen now."""
+        return bool(self._frozen)
+
+    def _on_training_start(self) -> None:
+        if self.model.num_timesteps < self.steps:
+            self._freeze()
+
+    def _on_rollout_start(self) -> None:
+        if self._frozen and self.model.num_timesteps >= self.steps:
+            self._release()
+
+    def _on_rollout_end(self) -> None:
+        self.logger.record("train/actor_frozen", int(self.active))
+
+    def _on_step(self) -> bool:
+        return True
+
+    def _on_training_end(self) -> None:
+        self._release()
+
+    def _freeze(self) -> None:
+        import torch
+
+        self._frozen = [p for p in actor_parameters(self.model) if p.requires_grad]
+        for p in self._frozen:
+            p.requires_grad_(False)
+        log_alpha = getattr(self.model, "log_ent_coef", None)
+        optimizer = getattr(self.model, "ent_coef_optimizer", None)
+        if log_alpha is not None and optimizer is not None:
+            held = log_alpha.detach().clone()
+
+            def hold(*_: Any) -> None:
+                with torch.no_grad():
+                    log_alpha.copy_(held)
+
+            self._hook = optimizer.register_step_post_hook(hold)
+
+    def _release(self) -> None:
+        for p in self._frozen:
+            p.requires_grad_(True)
+        self._frozen = []
+        if self._hook is not None:
+            self._hook.remove()
+            self._hook = None
+            self.model.ent_coef_optimizer.state.clear()
+
+
+class ResidualScaleRamp(BaseCallback):
+    """Ramps the residual authority of the training envs (``agents.residual.ResidualWrapper``'s
+    ``scale``) linearly from 0 to its configured value over the first ``steps`` env steps,
+    set at the start of every rollout (the evaluation envs keep the full scale). Logs
+    ``train/residual_scale_fraction``.
+
+    Args:
+        steps: length of the ramp [env steps, all envs together], >= 1.
+    """
+
+    def __init__(self, steps: int) -> None:
+        super().__init__()
+        if isinstance(steps, bool) or not isinstance(steps, int) or steps < 1:
+            raise ValueError(f"scale_ramp: must be an integer >= 1 (env steps), got {steps!r}")
+        self.steps = steps
+        self.full: list[float] = []
+
+    def fraction(self) -> float:
+        """The fraction of the full scale at the current step."""
+        return min(self.model.num_timesteps / self.steps, 1.0)
+
+    def _on_training_start(self) -> None:
+        self.full = [float(s) for s in self.training_env.get_attr("max_scale")]
+        self._apply(self.fraction())
+
+    def _on_rollout_start(self) -> None:
+        self._apply(self.fraction())
+
+    def _on_step(self) -> bool:
+        return True
+
+    def _on_training_end(self) -> None:
+        self._apply(1.0)
+
+    def _apply(self, fraction: float) -> None:
+        for i, full in enumerate(self.full):
+            self.training_env.env_method("set_scale", full * fraction, indices=[i])
+        self.logger.record("train/residual_scale_fraction", fraction)
+
+
+class CurriculumLog(BaseCallback):
+    """Logs the terrain curriculum (``agents.curriculum.TerrainCurriculum``) of the training
+    envs at the end of every rollout: ``curriculum/difficulty_mean``, ``_min``, ``_max``, the
+    mean level ``curriculum/level_mean``, the episodes promoted and demoted so far
+    (``curriculum/promoted``, ``curriculum/demoted``) and, in TensorBoard, the histogram of
+    the envs' difficulties ``curriculum/difficulty``."""
+
+    def __init__(self) -> None:
+        super().__init__()
+        self.difficulty: np.ndarray = np.zeros(0)
+        self.level: np.ndarray = np.zeros(0)
+        self.promoted = 0
+        self.demoted = 0
+
+    def _on_training_start(self) -> None:
+        env = self.training_env
+        self.difficulty = np.asarray(env.get_attr("curriculum_difficulty"), dtype=float)
+        self.level = np.asarray(env.get_attr("curriculum_level"), dtype=float)
+
+    def _on_step(self) -> bool:
+        for i, info in enumerate(self.locals.get("infos") or ()):
+            event = info.get("curriculum")
+            if event is not None:
+                self.difficulty[i] = event["next_difficulty"]
+                self.level[i] = event["next_level"]
+                self.promoted += event["next_level"] > event["level"]
+                self.demoted += event["next_level"] < event["level"]
+        return True
+
+    def _on_rollout_end(self) -> None:
+        self.record()
+
+    def record(self) -> None:
+        """Record the current levels in the logger."""
+        import torch
+
+        log = self.logger.record
+        log("curriculum/difficulty_mean", float(np.mean(self.difficulty)))
+        log("curriculum/difficulty_min", float(np.min(self.difficulty)))
+        log("curriculum/difficulty_max", float(np.max(self.difficulty)))
+        log("curriculum/level_mean", float(np.mean(self.level)))
+        log("curriculum/promoted", self.promoted)
+        log("curriculum/demoted", self.demoted)
+        log(
+            "curriculum/difficulty",
+            torch.as_tensor(self.difficulty),
+            exclude=("stdout", "log", "json", "csv"),
+        )

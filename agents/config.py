@@ -16,6 +16,16 @@ One file describes one training run. It holds two top-level sections:
       save_replay_buffer: false      # off-policy algorithms: also checkpoint the replay buffer
       vec_env: dummy                 # dummy | subproc (one process per env) | native (the
                                      # batched vector env; not with env_wrapper)
+      residual_init: default         # default | zero: zero last actor layer (start at the base)
+      init_log_std: null             # initial exploration log std (PPO, A2C, SAC); null: default
+      critic_warmup: 0               # env steps training only the critic, the actor frozen
+      scale_ramp: 0                  # env steps ramping the residual scale up from 0
+
+The last four (``agents.hyperparams.RUN_OPTIONS``) are the residual-learning recipe of Silver
+et al. 2018: with ``residual_init: zero`` a new model's action is exactly 0, so a residual
+agent starts as its base policy (``agents.residual.init_policy``); ``critic_warmup`` trains
+the value function on the frozen policy's transitions first (``agents.callbacks.CriticWarmup``);
+``scale_ramp`` grows the residual's authority (``agents.callbacks.ResidualScaleRamp``).
 
 ``<env id>`` (rl-zoo3's hyperparameter format): ``policy``, ``n_timesteps``, ``n_envs``,
 ``normalize``, ``frame_stack``, ``env_kwargs``, ``env_wrapper``, ``policy_kwargs`` and the
@@ -30,6 +40,7 @@ from __future__ import annotations
 
 import copy
 import importlib
+import inspect
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -40,7 +51,7 @@ import numpy as np
 import yaml
 
 import envs  # noqa: F401  (registers the roughwalk ids)
-from agents.hyperparams import check_hyperparams
+from agents.hyperparams import OFF_POLICY, RUN_OPTION_DEFAULTS, RUN_OPTIONS, check_hyperparams
 from agents.residual import ResidualWrapper
 from envs.config_util import read_yaml_mapping
 
@@ -160,6 +171,10 @@ class AgentConfig:
         checkpoint_freq: env steps between checkpoints (0: none).
         save_replay_buffer: also checkpoint the replay buffer (off-policy algorithms).
         vec_env: ``dummy``, ``subproc`` or ``native`` (see the module docstring).
+        residual_init: ``default`` or ``zero`` (``agents.hyperparams.RUN_OPTIONS``).
+        init_log_std: initial log standard deviation of the exploration, or None.
+        critic_warmup: env steps during which only the critic learns (0: none).
+        scale_ramp: env steps over which the residual scale rises from 0 (0: none).
         raw: the file's contents as read.
     """
 
@@ -174,6 +189,10 @@ class AgentConfig:
     checkpoint_freq: int = 200_000
     save_replay_buffer: bool = False
     vec_env: str = "dummy"
+    residual_init: str = "default"
+    init_log_std: float | None = None
+    critic_warmup: int = 0
+    scale_ramp: int = 0
     raw: dict[str, Any] = field(default_factory=dict, repr=False)
 
     @property
@@ -202,8 +221,6 @@ class AgentConfig:
         stops at the first whole multiple of it at or beyond the budget (PPO and A2C:
         ``n_steps * n_envs``; SAC and TD3: ``train_freq * n_envs`` when ``train_freq`` counts
         steps, else ``n_envs``)."""
-        import inspect
-
         defaults = inspect.signature(self.algo_class.__init__).parameters
         if self.algo in ("ppo", "a2c"):
             return int(self.hyperparams.get("n_steps", defaults["n_steps"].default)) * self.n_envs
@@ -264,10 +281,18 @@ class AgentConfig:
                 )
         return out
 
-    def wrap(self, env: gym.Env) -> gym.Env:
-        """Apply the configured ``env_wrapper`` chain to one env."""
+    def wrap(self, env: gym.Env, training: bool = False) -> gym.Env:
+        """Apply the configured ``env_wrapper`` chain to one env.
+
+        Args:
+            env: the env.
+            training: also apply the wrappers that shape training only (a class attribute
+                ``training_only = True``, e.g. ``agents.curriculum.TerrainCurriculum``);
+                evaluation envs leave them out.
+        """
         for cls, kwargs in self.wrapper_specs():
-            env = cls(env, **kwargs)
+            if training or not getattr(cls, "training_only", False):
+                env = cls(env, **kwargs)
         return env
 
     @property
@@ -314,6 +339,9 @@ class AgentConfig:
             "save_replay_buffer": self.save_replay_buffer,
             "vec_env": self.vec_env,
         }
+        for key, default in RUN_OPTION_DEFAULTS.items():  # only when set: as older runs wrote
+            if getattr(self, key) != default:
+                run[key] = getattr(self, key)
         return {"run": run, self.env_id: copy.deepcopy(self.hyperparams)}
 
 
@@ -402,15 +430,21 @@ def config_from_dict(
     run = data.get("run")
     if not isinstance(run, dict):
         raise ConfigError(f"{path}: missing 'run' section (with at least 'algo' and 'env')")
-    run = {**RUN_DEFAULTS, **run, **(run_overrides or {})}
-    unknown = sorted(set(run) - set(RUN_KEYS))
+    run = {**RUN_DEFAULTS, **RUN_OPTION_DEFAULTS, **run, **(run_overrides or {})}
+    unknown = sorted(set(run) - set(RUN_KEYS) - set(RUN_OPTIONS))
     if unknown:
         raise ConfigError(
-            f"{path}: unknown run setting(s) {', '.join(unknown)}; allowed: {', '.join(RUN_KEYS)}"
+            f"{path}: unknown run setting(s) {', '.join(unknown)}; "
+            f"allowed: {', '.join([*RUN_KEYS, *RUN_OPTIONS])}"
         )
     for key in ("algo", "env"):
         if key not in run:
             raise ConfigError(f"{path}: run.{key} is required")
+    for key, spec in RUN_OPTIONS.items():
+        try:
+            run[key] = spec.check(run[key])
+        except ValueError as exc:
+            raise ConfigError(f"{path}: run.{key} must be {exc}, got {run[key]!r}") from None
     for key, typ in RUN_KEYS.items():
         value = run[key]
         ok = isinstance(value, typ) and not (typ is int and isinstance(value, bool))
@@ -454,6 +488,10 @@ def config_from_dict(
         checkpoint_freq=run["checkpoint_freq"],
         save_replay_buffer=run["save_replay_buffer"],
         vec_env=run["vec_env"],
+        residual_init=run["residual_init"],
+        init_log_std=run["init_log_std"],
+        critic_warmup=run["critic_warmup"],
+        scale_ramp=run["scale_ramp"],
         raw=dict(data),
     )
     if cfg.vec_env not in VEC_ENVS:
@@ -463,9 +501,61 @@ def config_from_dict(
             f"{path}: run.vec_env = 'native' cannot apply env_wrapper (it wraps single envs); "
             "use 'dummy' or 'subproc'"
         )
-    cfg.wrapper_specs()  # resolve the wrapper classes now, for a clear error
-    cfg.algo_kwargs()
+    for cls, kwargs in cfg.wrapper_specs():  # resolve the wrapper classes now, for a clear error
+        _check_wrapper_arguments(path, cls, kwargs)
+    _check_run_options(cfg)
     return cfg
+
+
+def _check_wrapper_arguments(path: Path, cls: type, kwargs: dict[str, Any]) -> None:
+    """Unknown keyword arguments of an ``env_wrapper`` entry, and those its class checks
+    without an env (a ``check_arguments`` static method), are a ConfigError."""
+    name = f"{cls.__module__}.{cls.__qualname__}"
+    params = inspect.signature(cls).parameters
+    if not any(p.kind is inspect.Parameter.VAR_KEYWORD for p in params.values()):
+        allowed = [k for k in list(params)[1:] if params[k].kind is not params[k].VAR_POSITIONAL]
+        unknown = sorted(set(kwargs) - set(allowed))
+        if unknown:
+            raise ConfigError(
+                f"{path}: env_wrapper {name}: unknown argument(s) {', '.join(unknown)}; "
+                f"allowed: {', '.join(allowed)}"
+            )
+    check = getattr(cls, "check_arguments", None)
+    if check is not None:
+        try:
+            check(**kwargs)
+        except ValueError as exc:
+            raise ConfigError(f"{path}: env_wrapper {name}: {exc}") from None
+
+
+def _check_run_options(cfg: AgentConfig) -> None:
+    """The residual-learning options against the algorithm and its hyperparameters."""
+    kwargs = cfg.algo_kwargs()
+    if cfg.scale_ramp and not cfg.is_residual:
+        raise ConfigError(f"{cfg.path}: run.scale_ramp needs an agents.residual.ResidualWrapper")
+    if cfg.init_log_std is not None:
+        if cfg.algo not in RUN_OPTIONS["init_log_std"].algos:
+            raise ConfigError(
+                f"{cfg.path}: run.init_log_std: {cfg.algo.upper()} has no log standard deviation "
+                "(its exploration is noise_type/noise_std)"
+            )
+        if "log_std_init" in (kwargs.get("policy_kwargs") or {}) and cfg.algo != "sac":
+            raise ConfigError(
+                f"{cfg.path}: run.init_log_std and policy_kwargs.log_std_init both set the "
+                "initial exploration; give one"
+            )
+    if cfg.residual_init == "zero" and cfg.algo in OFF_POLICY:
+        learning_starts = kwargs.get("learning_starts")
+        if learning_starts is None:
+            sig = inspect.signature(cfg.algo_class.__init__).parameters
+            learning_starts = sig["learning_starts"].default
+        if learning_starts > 0:
+            raise ConfigError(
+                f"{cfg.path}: run.residual_init = 'zero' needs learning_starts: 0 (got "
+                f"{learning_starts}): {cfg.algo.upper()} acts uniformly at random before "
+                "learning_starts, not from the zero-initialised policy; use run.critic_warmup "
+                "to train the critic first"
+            )
 
 
 def _check_range(path: Path, name: str, value: int, lo: int, hi: int | None) -> None:

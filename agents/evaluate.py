@@ -14,6 +14,14 @@ reached), footsteps taken (until failure or time limit), distance walked [m], me
 [m/s] (distance over episode duration), motor work [J] (absolute, ``int |tau q1dot| dt``), and
 cost of transport ``work / (m g distance)`` with ``m`` the robot's total mass. Summary: means
 over episodes; the summary cost of transport is total work over total ``m g distance``.
+
+Certificate (the ``reference`` policy only: the transverse controller's Riccati gains; None for
+every other policy): per completed footstep the Lyapunov value ``V = x_perp' P x_perp`` at its
+first and last tick, their ratio, the largest ``|x_perp|`` and ``|u|``
+(:meth:`controllers.controller.StepRecord.certificate`), and per episode and in the summary
+the median and largest ratio and the fraction of footsteps with ratio below 1. The
+``controller_mode`` (``replan`` or ``fixed-plan``) says which certificate that is: in replan
+mode every step starts at ``V`` about 0 and the ratios are not a certificate.
 """
 
 from __future__ import annotations
@@ -35,9 +43,13 @@ import yaml
 
 import envs  # noqa: F401  (registers the roughwalk ids)
 from agents.config import EVAL_SEED_OFFSET, MAX_SEED, TEST_SEED, ConfigError
-from agents.policies import BASELINES, Policy
+from agents.policies import BASELINES, Policy, make_baseline_policy
 from agents.runs import find_vecnormalize, load_vecnormalize
 from agents.trained import TrainedPolicy, load_policy
+from controllers.controller import ControllerConfig, PDController, TransverseController
+
+#: the baselines that take a controller mode (``--controller-mode``)
+CONTROLLED_BASELINES = ("pd", "reference")
 
 
 def eval_seeds(seed: int, episodes: int) -> list[int]:
@@ -69,6 +81,12 @@ class EpisodeResult:
         motor_work: absolute motor work [J].
         cost_of_transport: ``motor_work / (m g distance)``, None without forward progress.
         episode_return: sum of the rewards.
+        certificate: per completed footstep (the step in progress at the end left out) its
+            ``index`` and :meth:`controllers.controller.StepRecord.certificate` values; None
+            for a policy without the transverse controller.
+        V_ratio_median, V_ratio_max: median and largest ``V_end / V_start`` over those
+            footsteps (None without any).
+        V_ratio_below_1: fraction of those footsteps with ``V_end / V_start < 1``.
     """
 
     seed: int
@@ -82,6 +100,10 @@ class EpisodeResult:
     motor_work: float
     cost_of_transport: float | None  # None when the walker made no forward progress
     episode_return: float
+    certificate: list[dict[str, Any]] | None = None
+    V_ratio_median: float | None = None
+    V_ratio_max: float | None = None
+    V_ratio_below_1: float | None = None
 
 
 @dataclass
@@ -96,6 +118,8 @@ class Evaluation:
         total_mass: the robot's total mass [kg].
         gravity: gravitational acceleration [m/s^2].
         summary: the metrics over the episodes (computed by :func:`summarize` when empty).
+        controller_mode: the transverse controller's mode (``replan`` or ``fixed-plan``) for
+            the ``pd`` and ``reference`` policies, else None.
     """
 
     policy: str
@@ -105,6 +129,7 @@ class Evaluation:
     total_mass: float
     gravity: float
     summary: dict[str, Any] = field(default_factory=dict)
+    controller_mode: str | None = None
 
     def __post_init__(self) -> None:
         if not self.summary:
@@ -119,6 +144,7 @@ class Evaluation:
             "total_mass": self.total_mass,
             "gravity": self.gravity,
             "summary": self.summary,
+            "controller_mode": self.controller_mode,
             "episodes": [asdict(e) for e in self.episodes],
         }
 
@@ -141,7 +167,39 @@ def summarize(episodes: Sequence[EpisodeResult], total_mass: float, g: float) ->
         "cost_of_transport": work / (total_mass * g * distance) if distance > 0 else None,
         "mean_return": float(np.mean([e.episode_return for e in episodes])),
         "failure_reasons": dict(Counter(e.failure for e in failed if e.failure)),
+        **ratio_summary(
+            None if all(e.certificate is None for e in episodes) else _ratios(episodes)
+        ),
     }
+
+
+def _ratios(episodes: Sequence[EpisodeResult]) -> list[float]:
+    """The known ``V_end / V_start`` of every completed footstep of the ``episodes``."""
+    return [c["V_ratio"] for e in episodes for c in e.certificate or () if c["V_ratio"] is not None]
+
+
+def ratio_summary(ratios: Sequence[float] | None) -> dict[str, float | None]:
+    """``V_ratio_median``, ``V_ratio_max`` and ``V_ratio_below_1`` (the fraction below 1) of
+    the footsteps' ``ratios`` (all None for None or none)."""
+    if not ratios:
+        return {"V_ratio_median": None, "V_ratio_max": None, "V_ratio_below_1": None}
+    r = np.asarray(ratios, dtype=float)
+    return {
+        "V_ratio_median": float(np.median(r)),
+        "V_ratio_max": float(r.max()),
+        "V_ratio_below_1": float(np.mean(r < 1)),
+    }
+
+
+def footstep_certificate(policy: Policy) -> list[dict[str, Any]] | None:
+    """Per completed footstep of ``policy``'s last episode: ``index`` and the
+    :meth:`controllers.controller.StepRecord.certificate` values; None unless the policy runs
+    the transverse controller (plain PD has no Lyapunov function)."""
+    ctrl = getattr(policy, "controller", None)
+    if not isinstance(ctrl, TransverseController) or isinstance(ctrl, PDController):
+        return None
+    ran = [r for r in ctrl.records if r.ticks > 0]
+    return [{"index": r.index, **r.certificate()} for r in ran[:-1]]
 
 
 def _robot(env: gym.Env) -> tuple[float, float, float]:
@@ -173,6 +231,8 @@ def run_episode(
     failure = info.get("failure") or None
     distance = float(info.get("distance", 0.0))
     duration = steps * dt
+    cert = footstep_certificate(policy)
+    ratios = None if cert is None else [c["V_ratio"] for c in cert if c["V_ratio"] is not None]
     return EpisodeResult(
         seed=seed,
         success=failure is None,
@@ -185,6 +245,8 @@ def run_episode(
         motor_work=work,
         cost_of_transport=work / (mass * g * distance) if distance > 0 else None,
         episode_return=total_return,
+        certificate=cert,
+        **ratio_summary(ratios),
     )
 
 
@@ -294,6 +356,8 @@ def make_eval_env(
     env_kwargs: dict[str, Any] | None = None,
     vecnormalize: str | None = None,
     algo: str | None = None,
+    controller_mode: str | None = None,
+    plan_steps: int | None = None,
 ) -> tuple[gym.Env, Policy, str, dict[str, Any]]:
     """The env (with the agent's wrappers) and the policy for ``policy_spec``.
 
@@ -303,10 +367,21 @@ def make_eval_env(
         env_kwargs: keyword arguments of ``gym.make`` (default: a trained model's own).
         vecnormalize: a trained model's ``VecNormalize`` statistics (default: beside it).
         algo: a trained model's algorithm (default: from its run or the file).
+        controller_mode: ``replan`` or ``fixed-plan`` for the ``pd`` and ``reference``
+            baselines (None: their default, replan).
+        plan_steps: footsteps of the fixed plan (fixed-plan only; None: sized for the env's
+            episode, see :meth:`controllers.ControllerConfig.for_mode`).
 
     Returns:
         ``(env, policy, env_id, env_kwargs)``, with the env id and keyword arguments used.
     """
+    if controller_mode is not None and policy_spec not in CONTROLLED_BASELINES:
+        raise ValueError(
+            f"controller_mode: applies to the {' and '.join(CONTROLLED_BASELINES)} policies, "
+            f"not to {policy_spec}"
+        )
+    if plan_steps is not None and controller_mode != "fixed-plan":
+        raise ValueError("plan_steps: applies to controller_mode fixed-plan only")
     trained = None
     if policy_spec not in BASELINES:
         trained = load_trained(policy_spec, vecnormalize=vecnormalize, algo=algo)
@@ -327,7 +402,18 @@ def make_eval_env(
                 f"{env.observation_space.shape}"
             )
         return env, trained, env_id, env_kwargs
-    return env, load_policy(policy_spec, env), env_id, env_kwargs
+    if controller_mode is None:
+        return env, load_policy(policy_spec, env), env_id, env_kwargs
+    steps = env.spec.max_episode_steps if env.spec is not None else None
+    fields = {} if plan_steps is None else {"plan_steps": plan_steps}
+    try:
+        config = ControllerConfig.for_mode(
+            controller_mode, None if steps is None else steps * env.unwrapped.dt, **fields
+        )
+    except ValueError:
+        env.close()
+        raise
+    return env, make_baseline_policy(policy_spec, env, config=config), env_id, env_kwargs
 
 
 def evaluate(
@@ -339,6 +425,8 @@ def evaluate(
     vecnormalize: str | None = None,
     progress: bool = False,
     algo: str | None = None,
+    controller_mode: str | None = None,
+    plan_steps: int | None = None,
 ) -> Evaluation:
     """Evaluate a baseline (``passive``, ``pd``, ``reference``) or a trained model (path).
 
@@ -351,10 +439,12 @@ def evaluate(
         vecnormalize: a trained model's ``VecNormalize`` statistics (default: beside it).
         progress: show a progress bar.
         algo: a trained model's algorithm (default: from its run or the file).
+        controller_mode, plan_steps: the ``pd`` and ``reference`` baselines' controller mode
+            and fixed-plan length (see :func:`make_eval_env`).
     """
     seeds = eval_seeds(seed, episodes)
     env, policy, env_id, env_kwargs = make_eval_env(
-        policy_spec, env_id, env_kwargs, vecnormalize, algo
+        policy_spec, env_id, env_kwargs, vecnormalize, algo, controller_mode, plan_steps
     )
     mass, g, _ = _robot(env)
     iterator: Any = seeds
@@ -366,7 +456,9 @@ def evaluate(
         results = [run_episode(env, policy, s) for s in iterator]
     finally:
         env.close()
-    return Evaluation(policy_spec, env_id, env_kwargs, results, mass, g)
+    ctrl = getattr(policy, "controller", None)
+    mode = ctrl.config.mode if isinstance(ctrl, TransverseController) else None
+    return Evaluation(policy_spec, env_id, env_kwargs, results, mass, g, controller_mode=mode)
 
 
 def _write_atomically(path: str | Path, write: Any) -> None:
@@ -395,7 +487,8 @@ def write_json(evaluations: Sequence[Evaluation], path: str | Path) -> None:
 def write_csv(evaluations: Sequence[Evaluation], path: str | Path) -> None:
     """Write the episodes of the ``evaluations`` to ``path`` as CSV: one row per episode,
     with the policy and env in the first columns; the file appears complete or not at all."""
-    names = [f.name for f in EpisodeResult.__dataclass_fields__.values()]
+    # the per-footstep certificate is a list: in the JSON only
+    names = [f.name for f in EpisodeResult.__dataclass_fields__.values() if f.name != "certificate"]
 
     def write(fh: Any) -> None:
         writer = csv.writer(fh)

@@ -257,6 +257,55 @@ NORMALIZE_KEYS: dict[str, Hyperparameter] = {
 }
 
 
+#: the ``run`` settings of the residual-learning recipe (ours, not rl-zoo3's: it ignores ``run``)
+RUN_OPTIONS: dict[str, Hyperparameter] = {
+    h.name: h
+    for h in (
+        _h(
+            "residual_init",
+            ALL,
+            "choice",
+            "the policy's last actor layer: 'zero' (the agent starts at a zero action, a "
+            "residual agent exactly at its base policy) or 'default' (stable-baselines3's)",
+            choices=("default", "zero"),
+        ),
+        _h(
+            "init_log_std",
+            ("ppo", "a2c", "sac"),
+            "float",
+            "initial log standard deviation of the exploration (PPO/A2C: log_std; SAC: the "
+            "log-std layer's bias, its weights zeroed) [log action units]; null: the default",
+            lo=-20,
+            hi=2,
+            choices=(None,),
+        ),
+        _h(
+            "critic_warmup",
+            ALL,
+            "int",
+            "env steps at the start of training during which only the critic (value function) "
+            "learns, the actor frozen [env steps]",
+            lo=0,
+        ),
+        _h(
+            "scale_ramp",
+            ALL,
+            "int",
+            "env steps over which the training envs' residual scale rises linearly from 0 to "
+            "the ResidualWrapper's scale (0: the full scale from the start) [env steps]",
+            lo=0,
+        ),
+    )
+}
+#: the defaults of :data:`RUN_OPTIONS` (a config without them trains as before)
+RUN_OPTION_DEFAULTS: dict[str, Any] = {
+    "residual_init": "default",
+    "init_log_std": None,
+    "critic_warmup": 0,
+    "scale_ramp": 0,
+}
+
+
 def known(algo: str) -> list[str]:
     """The hyperparameters algorithm ``algo`` takes, sorted."""
     return sorted({name for name, a in HYPERPARAMETERS if a == algo})

@@ -37,6 +37,8 @@ from agents.policies import Policy, make_baseline_policy
 from agents.wrappers import ESTIMATE_HIGH, ESTIMATE_LOW, estimate_features
 
 BaseSpec = str | Policy | Callable[[gym.Env], Policy]
+#: largest residual authority [action units]: the command range [-1, 1] spans 2
+MAX_SCALE = 2.0
 
 
 class ResidualWrapper(gym.Wrapper, gym.utils.RecordConstructorArgs):
@@ -49,7 +51,8 @@ class ResidualWrapper(gym.Wrapper, gym.utils.RecordConstructorArgs):
             (``"reference"``, ``"pd"``, ``"passive"``), a policy object, or a factory
             ``env -> policy`` (called once with the wrapped env).
         scale: residual authority, in action units: the agent can move the command by at most
-            ``scale`` either way; > 0.
+            ``scale`` either way; in (0, 2] (2 spans the whole command range). Training can
+            ramp it up from 0 (:meth:`set_scale`, ``agents.callbacks.ResidualScaleRamp``).
         observe_base: append the base command to the observation.
         observe_state: append the base policy's state estimate ``q1, q2, q1d, q2d, stance leg``
             [rad, rad/s, 0/1] (``agents.wrappers.estimate_features``) before the base command; the
@@ -81,9 +84,12 @@ class ResidualWrapper(gym.Wrapper, gym.utils.RecordConstructorArgs):
         act = env.action_space
         if not isinstance(act, spaces.Box):
             raise ValueError(f"ResidualWrapper needs a Box action space, got {act}")
-        if not (np.isfinite(scale) and scale > 0):
-            raise ValueError(f"scale = {scale!r} is out of range; allowed: > 0 (action units)")
+        if not (np.isfinite(scale) and 0 < scale <= MAX_SCALE):
+            raise ValueError(
+                f"scale = {scale!r} is out of range; allowed: in (0, {MAX_SCALE:g}] (action units)"
+            )
         self.scale = float(scale)
+        self.max_scale = float(scale)
         self.observe_base = bool(observe_base)
         self.observe_state = bool(observe_state)
         self._low = act.low.astype(np.float64)
@@ -124,6 +130,18 @@ class ResidualWrapper(gym.Wrapper, gym.utils.RecordConstructorArgs):
                 f"(e.g. 'reference' or 'pd'), got {self.base_name!r}"
             )
         self._base = np.zeros(act.shape, dtype=np.float64)
+
+    def set_scale(self, scale: float) -> None:
+        """Set the residual authority for the next steps (a schedule during training).
+
+        Args:
+            scale: in [0, the constructed ``scale``] [action units].
+        """
+        if not (np.isfinite(scale) and 0 <= scale <= self.max_scale):
+            raise ValueError(
+                f"scale = {scale!r} is out of range; allowed: in [0, {self.max_scale}]"
+            )
+        self.scale = float(scale)
 
     def _base_command(self, obs: Any) -> np.ndarray:
         """The base policy's command for ``obs``, clipped to the action limits."""
@@ -172,3 +190,56 @@ class ResidualWrapper(gym.Wrapper, gym.utils.RecordConstructorArgs):
         info["total_action"] = total
         self._base = self._base_command(obs)
         return self._observe(obs), reward, terminated, truncated, info
+
+
+def init_policy(model: Any, zero_output: bool = True, log_std: float | None = None) -> None:
+    """Start a new stable-baselines3 model at a zero action (Silver et al. 2018, "Residual
+    Policy Learning": a zero-initialised last actor layer), so that a residual agent's first
+    deterministic actions are exactly its base policy's.
+
+    Args:
+        model: a PPO or A2C (the ``action_net`` of its ``ActorCriticPolicy``), SAC (the mean
+            layer ``actor.mu``) or TD3 model (the last linear layer of ``actor.mu``; its
+            target actor is set equal).
+        zero_output: zero the weights and bias of that layer: the deterministic action is then
+            0 for every observation (SAC and TD3 squash it with tanh(0) = 0).
+        log_std: initial log standard deviation of the exploration [log action units], or None
+            to keep the model's: PPO and A2C fill their ``log_std``; SAC zeroes its log-std
+            layer's weights and sets its bias (a state-independent start), or fills its
+            ``log_std`` parameter with gSDE. TD3 has none (its exploration is action noise).
+
+    Raises:
+        ValueError: a model of another kind, or ``log_std`` for TD3 or outside [-20, 2].
+    """
+    import torch
+    from torch import nn
+
+    policy = model.policy
+    if hasattr(policy, "action_net"):  # on-policy ActorCriticPolicy
+        mean, std = policy.action_net, getattr(policy, "log_std", None)
+    elif hasattr(policy, "actor") and hasattr(policy.actor, "mu"):
+        mean, std = policy.actor.mu, getattr(policy.actor, "log_std", None)
+    else:
+        raise ValueError(f"init_policy: unsupported policy {type(policy).__name__}")
+    if isinstance(mean, nn.Sequential):  # TD3 (Linear, Tanh); SAC with gSDE (Linear, Hardtanh)
+        mean = [m for m in mean if isinstance(m, nn.Linear)][-1]
+    if log_std is not None:
+        if std is None:
+            raise ValueError(
+                f"init_policy: log_std: {type(model).__name__} has no log standard deviation"
+            )
+        if not (np.isfinite(log_std) and -20 <= log_std <= 2):
+            raise ValueError(f"init_policy: log_std = {log_std!r}; allowed: in [-20, 2]")
+    with torch.no_grad():
+        if zero_output:
+            mean.weight.zero_()
+            mean.bias.zero_()
+        if log_std is not None:
+            if isinstance(std, nn.Linear):
+                std.weight.zero_()
+                std.bias.fill_(log_std)
+            else:
+                std.fill_(log_std)
+    target = getattr(policy, "actor_target", None)
+    if target is not None:
+        target.load_state_dict(policy.actor.state_dict())

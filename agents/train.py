@@ -104,12 +104,14 @@ def make_vec_env(
     seed: int | None,
     monitor_dir: Path | None,
     vec_env: str | None = None,
+    training: bool = True,
 ) -> Any:
     """``n_envs`` copies of the config's env (with its wrappers) as an SB3 ``VecEnv``.
 
     ``vec_env`` (default: the config's ``run.vec_env``): ``dummy`` (one process), ``subproc``
     (one process per env) or ``native`` (the batched vector env through
-    ``agents.sb3_vec_env``; no env wrappers). Env ``i`` is seeded with ``seed + i``.
+    ``agents.sb3_vec_env``; no env wrappers). Env ``i`` is seeded with ``seed + i``. Training
+    envs (``training``) also get the training-only wrappers (the terrain curriculum).
     """
     from stable_baselines3.common.env_util import make_vec_env as sb3_make_vec_env
     from stable_baselines3.common.vec_env import DummyVecEnv, SubprocVecEnv, VecMonitor
@@ -124,7 +126,7 @@ def make_vec_env(
             monitor_dir.mkdir(parents=True, exist_ok=True)
             return VecMonitor(venv, filename=str(monitor_dir / "vec"))
         return VecMonitor(venv)
-    wrapper = cfg.wrap if cfg.wrapper_specs() else None
+    wrapper = functools.partial(cfg.wrap, training=training) if cfg.wrapper_specs() else None
     return sb3_make_vec_env(
         functools.partial(_make_env, cfg.env_id),
         n_envs=n_envs,
@@ -144,7 +146,7 @@ def check_env(cfg: AgentConfig) -> None:
     except (ValueError, TypeError, KeyError) as exc:
         raise ConfigError(f"{cfg.path}: env_kwargs {cfg.env_kwargs}: {exc}") from exc
     try:
-        env = cfg.wrap(env)
+        env = cfg.wrap(env, training=True)
         env.reset(seed=cfg.seed)
     except (ValueError, TypeError, KeyError) as exc:
         raise ConfigError(f"{cfg.path}: env_wrapper: {exc}") from exc
@@ -153,7 +155,9 @@ def check_env(cfg: AgentConfig) -> None:
 
 
 def make_callbacks(cfg: AgentConfig, run_dir: Path, eval_env: Any, report: bool = True) -> list:
-    """Checkpoints (with VecNormalize statistics) and held-out periodic evaluation.
+    """Checkpoints (with VecNormalize statistics), held-out periodic evaluation, the critic
+    warm-up (``run.critic_warmup``), the residual scale ramp (``run.scale_ramp``) and the
+    terrain curriculum's log (with a ``TerrainCurriculum`` wrapper).
 
     Args:
         cfg: the agent config (frequencies in env steps, all envs together).
@@ -162,9 +166,23 @@ def make_callbacks(cfg: AgentConfig, run_dir: Path, eval_env: Any, report: bool 
         report: print one line per evaluation.
     """
     # the callbacks subclass SB3's: imported with SB3, not with this module
-    from agents.callbacks import Checkpoint, HeldOutEvalCallback, SaveBestModel
+    from agents.callbacks import (
+        Checkpoint,
+        CriticWarmup,
+        CurriculumLog,
+        HeldOutEvalCallback,
+        ResidualScaleRamp,
+        SaveBestModel,
+    )
+    from agents.curriculum import TerrainCurriculum
 
     callbacks: list = []
+    if cfg.critic_warmup > 0:
+        callbacks.append(CriticWarmup(cfg.critic_warmup))
+    if cfg.scale_ramp > 0:
+        callbacks.append(ResidualScaleRamp(cfg.scale_ramp))
+    if any(issubclass(cls, TerrainCurriculum) for cls, _ in cfg.wrapper_specs()):
+        callbacks.append(CurriculumLog())
     if cfg.checkpoint_freq > 0:
         callbacks.append(
             Checkpoint(
@@ -359,7 +377,9 @@ def build(
         env = make_vec_env(cfg, cfg.n_envs, cfg.seed, monitor)
         eval_kind = "native" if cfg.vec_env == "native" else "dummy"  # same wrapper chain
         if cfg.eval_freq:
-            eval_env = make_vec_env(cfg, 1, EVAL_SEED_OFFSET + cfg.eval_seed, None, eval_kind)
+            eval_env = make_vec_env(
+                cfg, 1, EVAL_SEED_OFFSET + cfg.eval_seed, None, eval_kind, training=False
+            )
         norm = cfg.normalize_kwargs
         if norm is not None:
             if point is not None:
@@ -411,6 +431,10 @@ def _model(cfg: AgentConfig, env: Any, point: ResumePoint | None, verbose: int) 
             raise ConfigError(
                 f"{cfg.path}: {cfg.algo.upper()} rejects the hyperparameters: {exc}"
             ) from exc
+        if cfg.residual_init == "zero" or cfg.init_log_std is not None:
+            from agents.residual import init_policy
+
+            init_policy(model, cfg.residual_init == "zero", cfg.init_log_std)
     info = {"algo": cfg.algo, "config": json.loads(json.dumps(cfg.to_dict(), default=str))}
     setattr(model, MODEL_INFO, info)
     return model

@@ -5,14 +5,21 @@ on along the flat (roughwalk/CompassGaitStairs-v0, 10 s), controlled by the refe
 simulated encoders and contact switches, the high-gain observer, a plan per footstep and the
 transverse-linearization receding-horizon controller. Prints one row per footstep (the phase
 rate theta_dot at its start and end, the largest deviation |y| from the planned constraint,
-the Riccati solve time) and writes figures in the style of the paper's Figure 4 to the
-output folder:
+the Lyapunov value V = x_perp' P x_perp at the step's first and last tick and their ratio, the
+largest |x_perp| and |u|, the Riccati solve time) and writes figures in the style of the
+paper's Figure 4 to the output folder:
 
 - cartoon.png: the robot every 0.3 s, stance leg red, swing leg blue;
 - q2.png: the stance-leg angle q2 against time;
 - q1.png: the inter-leg angle q1 (measured) and its nominal value phi(q2);
 - velocities.png: the observer's q1_dot and q2_dot against their nominal values;
 - walk.gif with --gif (25 frames per simulated second).
+
+--controller-mode picks the controller's mode: replan (the default: every footstep planned
+afresh from the estimated post-impact state, so every step starts at V = 0 and nothing is
+certified) or fixed-plan (the paper's setting: one plan made at the start and tracked; its
+Appendix A argument makes V fall from step to step near the plan for the model with continuous
+feedback and no noise; with this env's 5 ms hold and the observer V hovers at a floor).
 
 The first run compiles the simulator's and the controller's numba kernels (about a minute);
 later runs load them from the cache.
@@ -27,6 +34,7 @@ from typing import Any
 
 import gymnasium as gym
 import numpy as np
+from rich import box
 from rich.console import Console
 from rich.markup import escape
 from rich.table import Table
@@ -41,6 +49,7 @@ from commands.cli import (
     int_range,
 )
 from controllers import ControllerConfig, make_reference_policy
+from controllers.controller import MODES
 from envs.physics import model
 
 GIF_FPS = 25  # frames per simulated second
@@ -64,6 +73,19 @@ def configure(parser: argparse.ArgumentParser) -> None:
     )
     parser.add_argument(
         "--horizon", type=int_range(1, 10), default=3, help="look-ahead in footsteps"
+    )
+    parser.add_argument(
+        "--controller-mode",
+        choices=MODES,
+        default="replan",
+        help="replan every footstep, or track one plan made at the start (the paper's "
+        "certified setting) (default: %(default)s)",
+    )
+    parser.add_argument(
+        "--plan-steps",
+        type=int_range(2),
+        help="footsteps of the fixed plan (fixed-plan only; default: enough for the duration, "
+        "1.5 a second plus the look-ahead)",
     )
     parser.add_argument(
         "--output", type=Path, default=Path("outputs/demo"), help="folder for the figures"
@@ -100,6 +122,8 @@ def rollout(
     duration: float | None = None,
     horizon: int = 3,
     frames: bool = False,
+    mode: str = "replan",
+    plan_steps: int | None = None,
 ) -> dict[str, Any]:
     """Run the reference policy on ``env_id``.
 
@@ -110,6 +134,10 @@ def rollout(
         horizon: the controller's look-ahead [footsteps].
         frames: also render ``GIF_FPS`` frames per simulated second, ``GIF_WIDTH`` px wide, in
             one palette of 64 colours.
+        mode: the controller's mode, ``"replan"`` or ``"fixed-plan"``
+            (:data:`controllers.controller.MODES`).
+        plan_steps: footsteps of the fixed plan (None: sized for the run's duration, see
+            :meth:`controllers.ControllerConfig.for_mode`); replan mode ignores it.
 
     Returns:
         The policy's history, the true states, stance feet and legs per tick, the records, the
@@ -117,13 +145,17 @@ def rollout(
         (Pillow palette images) and their period [s].
     """
     env = gym.make(env_id, render_mode="rgb_array" if frames else None)
-    policy = make_reference_policy(
-        env, config=ControllerConfig(horizon=horizon), record_history=True
-    )
-    obs, info = env.reset(seed=seed)
-    policy.reset()
     dt = env.unwrapped.dt
     duration = episode_duration(env) if duration is None else duration
+    fields: dict[str, Any] = {"horizon": horizon}
+    if plan_steps is not None and mode == "fixed-plan":
+        fields["plan_steps"] = plan_steps
+    config = ControllerConfig.for_mode(
+        mode, min(duration, episode_duration(env)) if math.isfinite(duration) else None, **fields
+    )
+    policy = make_reference_policy(env, config=config, record_history=True)
+    obs, info = env.reset(seed=seed)
+    policy.reset()
     every = max(1, round(1.0 / (GIF_FPS * dt)))
     states, feet, legs, times, images = [], [], [], [], []
     failure = None
@@ -159,6 +191,7 @@ def rollout(
         "robot": robot,
         "frames": images,
         "frame_period": every * dt,
+        "config": config,
     }
 
 
@@ -167,32 +200,81 @@ STEP_COLUMNS = (
     "theta_dot start [rad/s]",
     "theta_dot end [rad/s]",
     "max |y| [rad]",
+    "V start",
+    "V end",
+    "V end/start",
+    "max |x_perp|",
+    "max |u|",
     "Riccati [ms]",
     "note",
 )
 
 
+# the column names on two or three lines
+STEP_HEADERS = (
+    "step",
+    "theta_dot\nstart\n[rad/s]",
+    "theta_dot\nend\n[rad/s]",
+    "max |y|\n[rad]",
+    "V\nstart",
+    "V\nend",
+    "V end\n/V start",
+    "max\n|x_perp|",
+    "max\n|u|",
+    "Riccati\n[ms]",
+    "note",
+)
+
+
+def _g(value: float | None) -> str:
+    """``value`` with 2 significant digits, ``-`` for None."""
+    return "-" if value is None else f"{value:.2g}"
+
+
 def step_table(records: list, last: str | None = None) -> list[tuple[str, ...]]:
     """Rows of :data:`STEP_COLUMNS` (step, theta_dot at start and end [rad/s], max ``|y|``
-    [rad], Riccati solve [ms], note), one per footstep ``records`` entry that ran; ``last``
-    is added to the note of the last row (the step in progress when the run ended)."""
+    [rad], ``V`` at the first and last tick and their ratio, max ``|x_perp|``, max ``|u|``
+    [input units], Riccati solve [ms], note), one per footstep ``records`` entry that ran;
+    ``last`` is added to the note of the last row (the step in progress when the run ended)."""
     ran = [r for r in records if r.ticks > 0]
     rows = []
     for i, r in enumerate(ran):
         notes = [r.fallback] if r.fallback else []
         if last and i == len(ran) - 1:
             notes.append(last)
+        cert = r.certificate()
         rows.append(
             (
                 str(r.index),
                 f"{r.thetadot_start:.3f}",
                 f"{r.thetadot_end:.3f}",
                 f"{r.max_abs_y:.4f}",
+                _g(cert["V_start"]),
+                _g(cert["V_end"]),
+                _g(cert["V_ratio"]),
+                _g(cert["max_xperp_norm"]),
+                _g(cert["max_abs_u"]),
                 "-" if math.isnan(r.riccati_time) else f"{r.riccati_time * 1e3:.2f}",
                 "; ".join(notes),
             )
         )
     return rows
+
+
+def certificate_summary(records: list, mode: str) -> str:
+    """One line on the footsteps completed in ``records`` (all but the last one that ran):
+    how often ``V`` fell over a step and from one step's start to the next, in ``mode``."""
+    ran = [r.certificate() for r in records if r.ticks > 0]
+    done = ran[:-1]
+    ratios = [c["V_ratio"] for c in done if c["V_ratio"] is not None]
+    starts = [c["V_start"] for c in ran]
+    pairs = [(a, b) for a, b in zip(starts, starts[1:]) if a is not None and b is not None]
+    fell = sum(r < 1 for r in ratios)
+    line = f"{mode}: V end/start < 1 on {fell} of {len(ratios)} completed footsteps"
+    if mode == "replan":
+        return line + " (every step is planned afresh from its start state: V start is about 0)"
+    falls = sum(b < a for a, b in pairs)
+    return line + f"; V start fell from one footstep to the next {falls} of {len(pairs)} times"
 
 
 def figures(res: dict[str, Any], out: Path) -> list[Path]:
@@ -298,17 +380,32 @@ def run(args: argparse.Namespace) -> int:
     """``roughwalk demo`` with the parsed ``args``: the table, the figures; returns the exit
     status (1 if the walker failed)."""
     console = Console(highlight=False)
+    if args.plan_steps is not None and args.controller_mode != "fixed-plan":
+        raise ValueError("--plan-steps: applies to --controller-mode fixed-plan only")
     if not args.no_figures:
         check_output_path(args.output, directory=True, option="--output")
     announce_compilation(SIMULATOR_KERNELS + CONTROLLER_KERNELS, console)
-    res = rollout(args.env, args.seed, args.duration, args.horizon, frames=args.gif)
-    table = Table(title=escape(f"{args.env}, seed {args.seed}: one row per footstep"))
-    for col in STEP_COLUMNS:
-        table.add_column(escape(col), justify="right" if col != "note" else "left")
+    res = rollout(
+        args.env,
+        args.seed,
+        args.duration,
+        args.horizon,
+        frames=args.gif,
+        mode=args.controller_mode,
+        plan_steps=args.plan_steps,
+    )
+    title = f"{args.env}, seed {args.seed}, {args.controller_mode}: one row per footstep"
+    table = Table(title=escape(title), box=box.SIMPLE_HEAD, show_edge=False, padding=(0, 1, 0, 0))
+    for col, header in zip(STEP_COLUMNS, STEP_HEADERS, strict=True):
+        numeric = col != "note"
+        table.add_column(escape(header), justify="right" if numeric else "left", no_wrap=numeric)
     last = "unfinished" if res["failure"] is None else f"failed: {res['failure']}"
     for row in step_table(res["records"], last=last):
         table.add_row(*(escape(c) for c in row))
-    console.print(table)
+    # as wide as the table needs: a narrower console would cut its numbers off
+    width = max(console.width, Console(width=1000).measure(table).maximum)
+    Console(highlight=False, width=width).print(table)
+    console.print(escape(certificate_summary(res["records"], args.controller_mode)), soft_wrap=True)
     status = "walked" if res["failure"] is None else f"FAILED ({res['failure']})"
     console.print(
         f"{status}: {res['footsteps']} footsteps, {res['distance']:.2f} m in {res['time']:.2f} s"

@@ -11,6 +11,13 @@ walked [m], mean speed [m/s], motor work [J] (absolute) and cost of transport (C
 m g distance, m the robot's total mass). The table shows means over the episodes; its CoT is
 the total work over the total m g distance.
 
+For the reference policy (the transverse controller) the JSON also holds, per episode and
+completed footstep, the Lyapunov value V = x_perp' P x_perp at the step's first and last tick,
+their ratio, the largest |x_perp| and |u|, and the median and largest ratio and the fraction
+below 1 per episode and over all; null for the other policies. --controller-mode fixed-plan
+tracks one plan made at the start of each episode (the paper's certified setting); in the
+default replan mode every step starts at V = 0 and the ratios certify nothing.
+
 Security: a trained model (.zip) and its VecNormalize statistics (.pkl) are Python pickles;
 loading them can run arbitrary code. Evaluate only files you trust. The command loads the
 model you name, the statistics beside it (or the --vecnormalize file) and its run's
@@ -34,6 +41,7 @@ from rich.table import Table
 
 from agents.config import TEST_SEED, parse_assignments
 from agents.evaluate import (
+    CONTROLLED_BASELINES,
     Evaluation,
     evaluate,
     learning_curve_data,
@@ -52,6 +60,7 @@ from commands.cli import (
     int_range,
     output_file,
 )
+from controllers.controller import MODES
 
 ALGOS = ("ppo", "sac", "td3", "a2c")
 
@@ -152,6 +161,20 @@ def print_table(evaluations: Sequence[Evaluation], title: str | None = None) -> 
     sys.stdout.write(render_table(evaluations, title, console.width, terminal))
 
 
+def certificate_line(ev: Evaluation) -> str | None:
+    """One line on the Lyapunov ratios of ``ev``'s footsteps (None without any)."""
+    s = ev.summary
+    if s.get("V_ratio_below_1") is None:
+        return None
+    n = sum(len(e.certificate or ()) for e in ev.episodes)
+    note = " (every step planned afresh: no certificate)" if ev.controller_mode == "replan" else ""
+    return (
+        f"{ev.controller_mode}: V end/start < 1 on {100 * s['V_ratio_below_1']:.0f}% of {n} "
+        f"completed footsteps, median {s['V_ratio_median']:.3g}, largest "
+        f"{s['V_ratio_max']:.3g}{note}"
+    )
+
+
 def _env_kwarg(text: str) -> tuple[str, Any]:
     """An argparse ``type=``: one ``KEY=VALUE`` env keyword argument (the value as YAML)."""
     try:
@@ -209,6 +232,18 @@ def configure(parser: argparse.ArgumentParser) -> None:
         "for a model moved out of its run folder",
     )
     parser.add_argument(
+        "--controller-mode",
+        choices=MODES,
+        help=f"the {' and '.join(CONTROLLED_BASELINES)} policies' controller: replan every "
+        "footstep (their default) or track one plan made at the start of each episode",
+    )
+    parser.add_argument(
+        "--plan-steps",
+        type=int_range(2),
+        help="footsteps of the fixed plan (--controller-mode fixed-plan only; default: enough "
+        "for the episode, 1.5 a second plus the look-ahead)",
+    )
+    parser.add_argument(
         "--json", type=output_file, metavar="FILE", help="write summary and episodes as JSON"
     )
     parser.add_argument(
@@ -257,6 +292,13 @@ def run(args: argparse.Namespace) -> int:
             raise FileNotFoundError(f"--policy: model file not found: {args.policy}")
     elif args.algo or args.vecnormalize:
         raise ValueError("--algo and --vecnormalize apply to trained models, not to baselines")
+    if args.controller_mode is not None and args.policy not in CONTROLLED_BASELINES:
+        raise ValueError(
+            f"--controller-mode: applies to the {' and '.join(CONTROLLED_BASELINES)} policies, "
+            f"not to {args.policy}"
+        )
+    if args.plan_steps is not None and args.controller_mode != "fixed-plan":
+        raise ValueError("--plan-steps: applies to --controller-mode fixed-plan only")
     for option, path in (("--json", args.json), ("--csv", args.csv)):
         if path is not None and path.exists() and not args.overwrite:
             raise ValueError(
@@ -278,6 +320,8 @@ def run(args: argparse.Namespace) -> int:
             vecnormalize=args.vecnormalize,
             progress=not args.no_progress,
             algo=args.algo,
+            controller_mode=args.controller_mode,
+            plan_steps=args.plan_steps,
         )
     except ValueError as exc:
         message = str(exc)
@@ -286,6 +330,9 @@ def run(args: argparse.Namespace) -> int:
         raise
     seeds = f"{ev.episodes[0].seed}-{ev.episodes[-1].seed}"
     print_table([ev], title=f"{ev.policy} on {ev.env_id}, held-out seeds {seeds}")
+    line = certificate_line(ev)
+    if line:
+        print(line)
     if args.json:
         write_json([ev], args.json)
     if args.csv:

@@ -105,10 +105,21 @@ def bezier(coeffs: np.ndarray, s: np.ndarray | float, deriv: int = 0) -> np.ndar
     if a.ndim not in (1, 2) or a.shape[-1] < 1:
         raise ValueError(f"Bezier coeffs must have shape (M+1,) or (K, M+1), got {a.shape}")
     basis = bernstein_basis(a.shape[-1] - 1, s, deriv)
-    out = basis @ a.T if a.ndim == 2 else basis @ a
-    if a.ndim == 2:
-        out = np.moveaxis(out, -1, 0)
+    out = _on_basis(a, basis)
     return float(out) if np.ndim(out) == 0 else out
+
+
+def _on_basis(coeffs: np.ndarray, basis: np.ndarray) -> np.ndarray:
+    """:func:`bezier_on_basis` for one polynomial or a batch ``(K, M + 1)`` of them and a basis
+    of any leading shape: the result has shape ``(K,) + basis.shape[:-1]`` (no ``K`` for one)."""
+    a = np.ascontiguousarray(coeffs, dtype=np.float64)
+    flat = np.ascontiguousarray(basis.reshape(-1, basis.shape[-1]))
+    rows = a.reshape(-1, a.shape[-1])
+    out = np.empty((rows.shape[0], flat.shape[0]))
+    for k in range(rows.shape[0]):
+        bezier_on_basis(rows[k], flat, out[k])
+    shape = basis.shape[:-1]
+    return out.reshape(shape) if a.ndim == 1 else out.reshape((rows.shape[0],) + shape)
 
 
 def bezier_derivative_coeffs(coeffs: np.ndarray) -> np.ndarray:
@@ -174,12 +185,8 @@ class BezierConstraint:
     def derivatives(self, theta: np.ndarray | float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """``(phi, phi', phi'')`` at ``theta`` in one pass."""
         s = self.s(theta)
-        basis = [bernstein_basis(self.order, s, d) for d in range(3)]
-        return (
-            basis[0] @ self.coeffs,
-            basis[1] @ self.coeffs / self.span,
-            basis[2] @ self.coeffs / self.span**2,
-        )
+        b = [_on_basis(self.coeffs, bernstein_basis(self.order, s, d)) for d in range(3)]
+        return b[0], b[1] / self.span, b[2] / self.span**2
 
     @staticmethod
     def second_coeff(a0: float, slope: float, theta_plus: float, theta_minus: float, order: int):

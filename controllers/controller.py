@@ -13,6 +13,22 @@ Every control tick then applies ``v = K(theta) x_perp`` and the partial feedback
 ``u = (v - R) / N`` (``y_ddot = N u + R``, hip friction included, so it is compensated), clipped to
 the actuator limit: :func:`controllers.feedback.feedback_law`.
 
+The two modes (:attr:`ControllerConfig.mode`):
+
+- ``"fixed-plan"`` (``replan=False``), the paper's setting: one plan of ``plan_steps`` footsteps
+  is made at reset and tracked with the receding-horizon jump Riccati. Its Appendix A argument
+  applies: ``V = x_perp' P x_perp`` with ``P = Z^-1`` of the step's solve decreases along each
+  step and does not increase when the horizon is renewed at the impact, so the planned motion is
+  locally exponentially orbitally stable (for the model, without noise or model error, within a
+  neighbourhood the argument does not size). When the plan runs out the controller falls back
+  as described below.
+- ``"replan"`` (the default): every footstep is planned afresh from the post-impact state, so
+  every step starts at ``x_perp = 0`` (``V_start`` about 0): no certificate; ``V`` over a step
+  only measures how far the step drifted from its own plan.
+
+Each :class:`StepRecord` keeps ``V`` at the step's first and last tick, their ratio, the largest
+``|x_perp|`` and the largest ``|u|``: the certificate made visible (evidence, not a proof).
+
 If planning fails (:class:`PlanningError`) beyond the second step, the look-ahead is shortened
 to the feasible steps (``fallback = "shorter horizon"``). If it fails earlier, the controller
 keeps the rest of the previous plan (shifted by one footstep, ``fallback = "previous plan"``)
@@ -27,7 +43,7 @@ from __future__ import annotations
 
 import math
 import time
-from dataclasses import asdict, dataclass, field
+from dataclasses import asdict, dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
@@ -51,6 +67,7 @@ from .planner import GaitPlanner, Plan, PlannerConfig, PlanningError, StepPlan
 from .transverse import StepModel
 
 __all__ = [
+    "MODES",
     "ControllerConfig",
     "PDController",
     "StepRecord",
@@ -59,6 +76,14 @@ __all__ = [
 
 #: PD gains (kp [1/s^2], kd [1/s]) used on a last remaining planned step
 FALLBACK_PD = (400.0, 40.0)
+
+#: the controller's modes (:attr:`ControllerConfig.mode`): replan at every footstep, or track
+#: one plan made at reset (the paper's setting, with its Appendix A certificate)
+MODES = ("replan", "fixed-plan")
+
+#: footsteps per simulated second a fixed plan is sized for when only the run's duration is
+#: known (:meth:`ControllerConfig.for_mode`); the paper robot takes about 1.1
+PLAN_STEPS_PER_SECOND = 1.5
 
 
 # ---------------------------------------------------------------------------- configuration
@@ -72,9 +97,11 @@ class ControllerConfig:
         R: weight on ``v = y_ddot`` (paper: 1), > 0.
         Qj: diagonal of the weight at each impact (paper: ones), > 0.
         grid: RK4 steps per footstep of the Riccati solve (``grid + 1`` gain nodes), >= 4.
-        replan: replan from the actual post-impact state at every footstep (True) or follow
-            the plan made at reset (False).
-        plan_steps: steps planned at reset when ``replan`` is False (>= horizon + 1); when
+        replan: replan from the actual post-impact state at every footstep (True, mode
+            ``"replan"``) or track the plan made at reset (False, mode ``"fixed-plan"``, the
+            paper's setting); see the module docstring for what each mode certifies.
+        plan_steps: steps planned at reset when ``replan`` is False (>= horizon + 1; choose
+            enough for the whole run: past the plan's end the controller falls back); when
             replanning, ``horizon + 1`` steps are planned at each footstep.
         margin: fraction of a step's span by which the nominal speed profile is extended
             beyond its ends, for states slightly before ``theta+`` or after ``theta-``.
@@ -122,6 +149,35 @@ class ControllerConfig:
         if not isinstance(self.replan, (bool, np.bool_)):
             raise ValueError(f"ControllerConfig.replan = {self.replan!r}; allowed: True or False")
 
+    @property
+    def mode(self) -> str:
+        """``"replan"`` or ``"fixed-plan"`` (one of :data:`MODES`), from :attr:`replan`."""
+        return MODES[0] if self.replan else MODES[1]
+
+    @classmethod
+    def for_mode(cls, mode: str, duration: float | None = None, **fields: Any) -> ControllerConfig:
+        """The config of ``mode`` (one of :data:`MODES`) with the other ``fields`` as given.
+
+        Args:
+            mode: ``"replan"`` or ``"fixed-plan"``.
+            duration: the run's simulated time [s] (> 0, finite); in fixed-plan mode without
+                ``plan_steps`` the plan is sized for it: :data:`PLAN_STEPS_PER_SECOND` footsteps
+                a second plus the look-ahead.
+            fields: other :class:`ControllerConfig` fields (not ``replan``).
+        """
+        if mode not in MODES:
+            raise ValueError(f"controller mode = {mode!r}; allowed: {', '.join(MODES)}")
+        if "replan" in fields:
+            raise ValueError("ControllerConfig.for_mode: give the mode, not replan")
+        config = cls(replan=mode == "replan", **fields)
+        if mode == "fixed-plan" and duration is not None and "plan_steps" not in fields:
+            d = real_setting("duration", duration, "a finite number > 0 [s]")
+            if not d > 0:
+                raise ValueError(f"duration = {duration!r}; allowed: a finite number > 0 [s]")
+            steps = math.ceil(PLAN_STEPS_PER_SECOND * d) + config.horizon + 1
+            config = replace(config, plan_steps=steps)
+        return config
+
     @classmethod
     def from_dict(cls, d: dict[str, Any] | None) -> ControllerConfig:
         """Build from a dict ``d`` of the fields (unknown keys raise ``ValueError``); None gives
@@ -155,13 +211,23 @@ class StepRecord:
         riccati_time: wall time of the step's Riccati solve [s]; solve_time: linearisation
             plus Riccati [s]; plan_time: planner call [s] (0 when not replanned).
         xperp_start, xperp_end: ``x_perp`` at the first and last tick of the step.
-        V_start, V_end: ``z' Z^-1 z`` at the first and last tick.
+        V_start, V_end: the Lyapunov value ``V = x_perp' P x_perp`` at the step's first tick
+            (just after the impact map, the start of tracking) and at its last tick (the
+            pre-impact side of the next touchdown), with ``P = Z^-1`` of the jump-Riccati
+            solution the step's feedback uses (the one solved at the step's start, or at a
+            replan within it), interpolated at the tick's phase as the gains are: at the first
+            tick ``P`` at about ``theta+``, at the last tick ``P`` at the phase just before the
+            impact (the solution's value before the jump, clamped at ``theta-`` if the
+            touchdown is late). NaN without gains; ``P = I`` for plain PD.
         V_increase: largest increase of ``V`` between consecutive ticks within the planned
             phase range ``[theta+, theta-]`` (should be about 0 or negative).
-        max_abs_u: largest ``|u|`` [input units]; saturated: ticks at the actuator limit.
+        max_abs_u: largest ``|u|`` over the step [input units]; saturated: ticks at the
+            actuator limit.
         fallback: None, ``"shorter horizon"`` (planning failed beyond the second step; the
             look-ahead is cut there), ``"previous plan"``, ``"PD on the last planned step"`` or
             ``"zero input"`` (see the module docstring); reason: the planning error.
+        max_xperp_norm: largest Euclidean norm of ``x_perp = [I, y, y_dot]`` over the step
+            (0 without gains).
     """
 
     index: int
@@ -183,6 +249,33 @@ class StepRecord:
     ticks: int = 0
     fallback: str | None = None
     reason: str | None = None
+    max_xperp_norm: float = 0.0
+
+    def certificate(self) -> dict[str, float | None]:
+        """The step's certificate values as plain data: ``V_start``, ``V_end``, ``V_ratio``,
+        ``max_xperp_norm``, ``max_abs_u``; None for what is unknown or not finite, and for
+        the ``V`` values of a step without Riccati gains (held with PD, or zero input)."""
+        riccati = self.fallback not in ("PD on the last planned step", "zero input")
+        values = {
+            "V_start": self.V_start if riccati else math.nan,
+            "V_end": self.V_end if riccati else math.nan,
+            "V_ratio": self.V_ratio if riccati else math.nan,
+            "max_xperp_norm": (
+                self.max_xperp_norm if self.ticks and self.fallback != "zero input" else math.nan
+            ),
+            "max_abs_u": self.max_abs_u if self.ticks else math.nan,
+        }
+        return {k: float(v) if math.isfinite(v) else None for k, v in values.items()}
+
+    @property
+    def V_ratio(self) -> float:
+        """``V_end / V_start``: below 1 when ``V`` fell over the step (NaN when either is
+        unknown; infinite when ``V_start`` is 0)."""
+        if not (self.V_start >= 0 and self.V_end >= 0):
+            return math.nan
+        if self.V_start == 0:
+            return math.inf if self.V_end > 0 else math.nan
+        return self.V_end / self.V_start
 
 
 # ---------------------------------------------------------------------------- controller
@@ -440,6 +533,7 @@ class TransverseController:
             rec.xperp_end = z
             rec.V_end = V
             rec.max_abs_y = max(rec.max_abs_y, abs(y))
+            rec.max_xperp_norm = max(rec.max_xperp_norm, math.sqrt(I * I + y * y + yd * yd))
             rec.max_abs_u = max(rec.max_abs_u, abs(u))
             rec.saturated += int(abs(u) >= self.robot.u_max)
             rec.ticks += 1

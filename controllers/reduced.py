@@ -89,9 +89,9 @@ def phase_at(theta_a: float, span: float, s: np.ndarray | float) -> np.ndarray |
 
 
 def phase_grid(theta_a: float, theta_b: float, n: int) -> np.ndarray:
-    """Chebyshev-Lobatto grid of ``n + 1`` phases on ``[theta_a, theta_b]`` [rad], increasing."""
-    x = cheb_nodes(n)
-    return 0.5 * (theta_a + theta_b) + 0.5 * (theta_b - theta_a) * x
+    """Chebyshev-Lobatto grid of ``n + 1`` phases on ``[theta_a, theta_b]`` [rad], increasing:
+    :func:`phase_at` of the :func:`step_fractions`."""
+    return phase_at(float(theta_a), float(theta_b) - float(theta_a), step_fractions(n))
 
 
 def cumulative_integral_matrix(n: int) -> np.ndarray:
@@ -102,18 +102,31 @@ def cumulative_integral_matrix(n: int) -> np.ndarray:
 
 
 def cumulative_integral(values: np.ndarray, theta_a: float, theta_b: float) -> np.ndarray:
-    """``int_{theta_a}^{theta_k} f`` at every node ``theta_k`` of :func:`phase_grid`.
+    """``int_{theta_a}^{theta_k} f`` at every node ``theta_k`` of :func:`phase_grid`
+    (:func:`grid_cumulative_integral` on each grid).
 
     Args:
         values: ``f`` at the ``n + 1`` grid nodes along the last axis (batches allowed).
         theta_a, theta_b: the grid's interval (scalars, or arrays broadcasting against
             ``values[..., :1]`` for a batch of grids).
     """
+    rows, halves, shape = _grids(values, theta_a, theta_b)
+    q = _cheb_matrices(rows.shape[1] - 1)[2]
+    out = np.empty_like(rows)
+    for r in range(rows.shape[0]):
+        grid_cumulative_integral(rows[r], q, halves[r], out[r])
+    return out.reshape(shape)
+
+
+def _grids(
+    values: np.ndarray, theta_a: np.ndarray | float, theta_b: np.ndarray | float
+) -> tuple[np.ndarray, np.ndarray, tuple[int, ...]]:
+    """Grids along the last axis of ``values`` as rows, each grid's half interval, the shape."""
     v = np.asarray(values, dtype=np.float64)
-    n = v.shape[-1] - 1
-    cheb_nodes(n)
-    q = _cheb_matrices(n)[2]
-    return 0.5 * (theta_b - theta_a) * (v @ q.T)
+    cheb_nodes(v.shape[-1] - 1)
+    half = 0.5 * (np.asarray(theta_b, dtype=np.float64) - np.asarray(theta_a, dtype=np.float64))
+    halves = np.broadcast_to(half, v.shape[:-1] + (1,)).reshape(-1)
+    return np.ascontiguousarray(v.reshape(-1, v.shape[-1])), halves, v.shape
 
 
 @_jit
@@ -186,18 +199,21 @@ def reduced_coefficients(
 def reduced_integral(
     theta: np.ndarray, alpha: np.ndarray, beta: np.ndarray, gamma: np.ndarray
 ) -> tuple[np.ndarray, np.ndarray]:
-    """``psi(theta_k, theta_0)`` and ``Gam(theta_k, theta_0)`` on a :func:`phase_grid`.
+    """``psi(theta_k, theta_0)`` and ``Gam(theta_k, theta_0)`` on a :func:`phase_grid`
+    (:func:`grid_reduced_integral` on each grid, no floor on ``alpha``).
 
     ``theta_dot^2(theta_k) = psi_k theta_dot(theta_0)^2 + Gam_k`` for every solution of the
     reduced dynamics. Arrays along the last axis (batches allowed); ``alpha`` must not vanish.
     """
     th = np.asarray(theta, dtype=np.float64)
-    a, b = th[..., :1], th[..., -1:]
-    k = cumulative_integral(2.0 * beta / alpha, a, b)
-    e = np.exp(k)  # 1 / psi(theta, theta_0)
-    hint = cumulative_integral(-2.0 * gamma / alpha * e, a, b)
-    psi = 1.0 / e
-    return psi, psi * hint
+    a, b, g = np.broadcast_arrays(*(np.asarray(x, dtype=np.float64) for x in (alpha, beta, gamma)))
+    al, halves, shape = _grids(a, th[..., :1], th[..., -1:])
+    be, ga = (np.ascontiguousarray(x.reshape(al.shape)) for x in (b, g))
+    q = _cheb_matrices(al.shape[1] - 1)[2]
+    psi, gam = np.empty_like(al), np.empty_like(al)
+    for r in range(al.shape[0]):
+        grid_reduced_integral(al[r], be[r], ga[r], q, halves[r], -math.inf, psi[r], gam[r])
+    return psi.reshape(shape), gam.reshape(shape)
 
 
 @_jit
@@ -250,14 +266,19 @@ def grid_step_time(
 
 
 def step_time(theta: np.ndarray, thetadot_sq: np.ndarray) -> np.ndarray:
-    """Time [s] to reach each grid phase from ``theta[0]``: ``int dtheta / theta_dot``.
+    """Time [s] to reach each grid phase from ``theta[0]``: ``int dtheta / theta_dot``
+    (:func:`grid_step_time` of one grid).
 
     ``thetadot_sq`` must be positive on the grid (raises ``ValueError`` otherwise).
     """
-    f = np.asarray(thetadot_sq, dtype=np.float64)
-    if np.any(~(f > 0)):
-        raise ValueError("step_time: theta_dot^2 must be > 0 on the whole grid")
-    return cumulative_integral(1.0 / np.sqrt(f), theta[0], theta[-1])
+    f = np.ascontiguousarray(thetadot_sq, dtype=np.float64)
+    if f.ndim != 1 or np.any(~(f > 0)):
+        raise ValueError("step_time: theta_dot^2 must be > 0 on the whole grid (one grid)")
+    cheb_nodes(f.size - 1)
+    thetadot, time = np.empty_like(f), np.empty_like(f)
+    half = 0.5 * (float(theta[-1]) - float(theta[0]))
+    grid_step_time(f, _cheb_matrices(f.size - 1)[2], half, 0.0, thetadot, time)
+    return time
 
 
 @_jit

@@ -24,6 +24,7 @@ import numba
 import numpy as np
 from numba import njit, prange
 
+from .disturbances import PushSchedule, robot_dict
 from .physics import model
 from .physics.actuator import actions_to_torques
 from .physics.kernel import (
@@ -81,7 +82,7 @@ def _observe_walker(i, mode, refresh, x, f, tx, ty, tn, settings, offsets, scan,
 @njit(cache=True)
 def _post_walker(i, P, x, f, work, wcol, new_fail, weights, hip_x, distance, step_work,
                  footsteps, reward, terminated):  # fmt: skip
-    hx, _ = model.hip_position(P, x[i, X_Q1], x[i, X_Q2], x[i, X_XS], x[i, X_YS])
+    hx, _ = model.hip_position(P[i], x[i, X_Q1], x[i, X_Q2], x[i, X_XS], x[i, X_YS])
     progress = hx - hip_x[i]
     hip_x[i] = hx
     w = work[i, wcol]
@@ -304,15 +305,19 @@ class WalkerBatch:
         self.settings = s = settings
         self.n = n
         self.robot = s.robot
-        self._P = s.robot.vector()
-        self.torque_limit = s.robot.tau_max  # hip torque at |action| = 1 [N m]
+        self.torque_limit = s.robot.tau_max  # hip torque at |action| = 1 [N m], nominal robot
         if parallel is None:
             parallel = n >= PARALLEL_MIN_WALKERS and numba.get_num_threads() > 1
         par = bool(parallel)
         self.sim = Simulator(
             s.robot, s.terrain.preview(), n, dt=s.dt, config=s.simulator, parallel=par
         )
+        self._P = self.sim.param_vectors  # (n, N_PARAMS): the simulated (true) robots
         self._after_step = _after_step_parallel if par else _after_step_serial
+        # model error: each walker's true hip torque at |action| = 1 [N m], and its parameters
+        self._tau_limits = np.full(n, self.torque_limit) if s.robot_error.enabled else None
+        self.robots = np.full(n, None, dtype=object)  # the true parameters, dicts of floats
+        self.pushes = PushSchedule(s.push, n) if s.push is not None else None
         self.layout = SensorLayout.from_config(s.sensors)
         low, high = observation_bounds(s.sensors, s.observation)
         self.obs_low, self.obs_high = low, high
@@ -353,13 +358,20 @@ class WalkerBatch:
             self.specs[i] = terrain.to_dict()
         self.terrains[i] = terrain
         q, qd, leg = s.initial_state.sample(rng, opts.get("state"), opts.get("stance_leg"))
+        o.streams[i] = seed_streams(rng, 1)[0]
+        if self._tau_limits is not None:
+            robot = s.robot_error.draw(s.robot, rng)
+            self.sim.set_params(robot, index=i)
+            self._tau_limits[i] = robot.tau_max
+            self.robots[i] = robot_dict(robot)
+        if self.pushes is not None:
+            self.pushes.reset(i, rng)
         try:
             self.sim.reset(q, qd, index=i, stance_leg=leg)
         except ValueError as exc:
             source = "reset option 'state'" if opts.get("state") is not None else "initial_state"
             raise ValueError(f"{source}: {exc}") from None
-        o.streams[i] = seed_streams(rng, 1)[0]
-        hx, _ = model.hip_position(self._P, v.q[i, 0], v.q[i, 1], *v.stance_foot[i])
+        hx, _ = model.hip_position(self._P[i], v.q[i, 0], v.q[i, 1], *v.stance_foot[i])
         self.episode.reset(i, hx)
         self.footholds[i] = [(float(v.stance_foot[i, 0]), float(v.stance_foot[i, 1]))]
         tx, ty, tn = self.sim.terrain_arrays
@@ -381,8 +393,16 @@ class WalkerBatch:
             ValueError: a NaN or infinite action, or a wrong shape (no walker is advanced).
         """
         v, e, o = self.sim_views, self.episode, self.obs_buffers
-        actions_to_torques(actions, self.torque_limit, self._torques)
+        if self._tau_limits is None:
+            actions_to_torques(actions, self.torque_limit, self._torques)
+        else:  # clip(a) * 1.0 is exact: the same torques as with the limit in the kernel
+            actions_to_torques(actions, 1.0, self._torques)
+            self._torques *= self._tau_limits
+        if self.pushes is not None:
+            self.pushes.apply(self.sim)
         self.sim.step(self._torques)
+        if self.pushes is not None:
+            self.pushes.after_step(v.n_impacts)
         tx, ty, tn = self.sim.terrain_arrays
         self._after_step(
             o.mode, self._P, v.states, v.flags, v.works, v.work_column, v.new_failure, tx, ty,
@@ -417,7 +437,7 @@ class WalkerBatch:
     # ------------------------------------------------------------------ info
     def info(self, i: int, terrain: bool = True) -> dict[str, Any]:
         """Info dict of walker ``i`` (true state etc.; see :class:`envs.CompassGaitEnv`); with
-        ``terrain``, also the course's spec."""
+        ``terrain``, also the course's spec (and the true robot under a model error)."""
         v, e = self.sim_views, self.episode
         q, qd, foot = v.q[i], v.qd[i], v.stance_foot[i]
         status = int(v.status[i])
@@ -434,6 +454,10 @@ class WalkerBatch:
         }
         if terrain:
             info["terrain"] = dict(self.specs[i])
+            if self.robots[i] is not None:
+                info["robot"] = dict(self.robots[i])
+        if self.pushes is not None and self.pushes.pushed[i]:
+            info["push"] = self.pushes.info(i)
         return info
 
     def infos(self) -> dict[str, Any]:
@@ -456,9 +480,14 @@ class WalkerBatch:
             "failure": failure,
             "terrain": self.specs.copy(),
         }
+        if self._tau_limits is not None:
+            d["robot"] = self.robots.copy()
         mask = np.ones(self.n, dtype=bool)  # one array shared by all keys (every entry is valid)
         for key in list(d):
             d["_" + key] = mask
+        if self.pushes is not None and self.pushes.pushed.any():
+            d["push"] = self.pushes.infos()
+            d["_push"] = self.pushes.pushed.copy()
         return d
 
     def render_args(self, i: int) -> dict[str, Any]:
@@ -472,6 +501,7 @@ class WalkerBatch:
             "stance_leg": int(v.stance_leg[i]),
             "terrain_xs": t.xs,
             "terrain_ys": t.ys,
+            "leg_length": self.sim.params[i].l,
             "footholds": self.footholds[i],
             "time": float(v.time[i]),
             "distance": float(self.episode.distance[i]),

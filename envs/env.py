@@ -110,12 +110,18 @@ class CompassGaitEnv(gym.Env):
     ``failure`` (name or None); ``reset`` and the step that terminates an episode also return
     ``terrain`` (the course's spec dict: ``Terrain.from_dict`` rebuilds it exactly, so any
     episode can be replayed; do not modify it). The vector env returns it at every step.
+    Under a model error (``robot_error``) ``robot`` (the true parameters of this episode, a
+    dict of floats: ``RobotParams.from_dict`` rebuilds it) comes with ``terrain``, also at
+    every step of the vector env (do not modify it); a step in which the hip was pushed
+    (``push``) has ``push``: ``{"time": s, "dv": m/s (signed, forwards positive),
+    "impulse": N s}`` (in the vector env, Gymnasium's nested arrays with their ``_`` masks).
 
     ## Arguments
 
     ``gym.make("roughwalk/CompassGait-v0", config="flat", robot=None, terrain=None,
     difficulty=None, dt=None, u_max=None, torque_limit=None, observation=None, sensors=None,
-    reward=None, initial_state=None, simulator=None, render_mode=None)``: ``config`` names a
+    reward=None, initial_state=None, simulator=None, robot_error=None, push=None,
+    render_mode=None)``: ``config`` names a
     file in ``configs/envs`` (or a YAML path / dict); every other argument overrides it
     (``None`` keeps the config's value; mappings are merged field by field):
 
@@ -131,7 +137,18 @@ class CompassGaitEnv(gym.Env):
       offset, spacing, range, latency);
     * ``reward``: :class:`envs.task.RewardConfig` fields; ``initial_state``:
       :class:`envs.task.InitialState` fields (nominal state, spread, stance leg); ``simulator``:
-      :class:`envs.physics.SimConfig` fields.
+      :class:`envs.physics.SimConfig` fields;
+    * ``robot_error``: model error (:class:`envs.disturbances.RobotError`): a relative
+      half-width for every physical parameter (``m, mH, mHg, Ic, l, lc, Fc, Fv, ktau``) or a
+      mapping ``{parameter: half-width}``, each in [0, 0.5); at every reset the simulated
+      robot is drawn uniformly within it from ``np_random`` (``lc`` moves with ``l``), while
+      ``env.unwrapped.robot`` stays the nominal model. Default 0: none;
+    * ``push``: hip pushes (:class:`envs.disturbances.PushConfig`), e.g.
+      ``{"dv": 0.1, "at": "mid_stance"}`` or ``{"dv": [0.05, 0.15], "every": [1, 2]}``: the
+      hip's horizontal speed jumps by ``dv`` [m/s] (forwards or backwards at random, or
+      ``direction``), through the model with the stance foot held
+      (:func:`envs.physics.model.hip_push`). Default None (``False`` switches a config's
+      pushes off).
 
     ``settings`` (an :class:`envs.settings.EnvSettings`) may replace ``config`` and the
     overrides.

@@ -99,6 +99,7 @@ class WalkerRenderer:
         distance: float = 0.0,
         steps: int = 0,
         failure: str | None = None,
+        leg_length: float | None = None,
     ) -> np.ndarray | None:
         """Draw one frame; returns the RGB array in ``"rgb_array"`` mode, else ``None``.
 
@@ -110,6 +111,8 @@ class WalkerRenderer:
             footholds: achieved footholds ``(x, y)`` [m].
             planned: planned foothold x positions [m] (drawn on the ground).
             time, distance, steps: shown as text; ``failure`` too when not ``None``.
+            leg_length: the legs' length drawn [m] (default: the renderer's ``leg_length``,
+                which sets the zoom), e.g. a simulated robot's under a model error.
         """
         if self._surface is None:
             self._init()
@@ -117,7 +120,7 @@ class WalkerRenderer:
         surf = self._surface
         q1, q2 = float(q[0]), float(q[1])
         xs, ys = float(stance_foot[0]), float(stance_foot[1])
-        l = self.l  # noqa: E741
+        l = self.l if leg_length is None else float(leg_length)  # noqa: E741
         hx, hy = xs + l * math.sin(q2), ys + l * math.cos(q2)
         sx, sy = hx - l * math.sin(q2 - q1), hy - l * math.cos(q2 - q1)
         # camera: hip at 40 % of the width, stance foot at 30 % of the height from the bottom

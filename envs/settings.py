@@ -7,10 +7,11 @@ and holds only what differs. :func:`load_env_config` returns a variant's merged 
 the keyword arguments of ``gym.make`` into validated :class:`EnvSettings`.
 
 Merging, the same for a base under a variant and for keyword arguments over a config: a key
-replaces the earlier value, except the sections ``sensors``, ``reward``, ``initial_state`` and
-``simulator``, whose mappings are merged field by field; giving ``u_max`` drops
-``torque_limit`` and the reverse (one actuator limit in either form). Keyword arguments that
-are ``None`` keep the config's value.
+replaces the earlier value (``robot_error`` and ``push`` as a whole), except the sections
+``sensors``, ``reward``, ``initial_state`` and ``simulator``, whose mappings are merged field by
+field; giving ``u_max`` drops ``torque_limit`` and the reverse (one actuator limit in either
+form). Keyword arguments that are ``None`` keep the config's value (``push=False`` switches
+off the pushes of a config, ``robot_error=0`` its model error).
 """
 
 from __future__ import annotations
@@ -26,6 +27,7 @@ import numpy as np
 from configs import CONFIG_DIR
 
 from .config_util import dataclass_from_mapping, read_yaml_mapping
+from .disturbances import PushConfig, RobotError
 from .physics.params import MAX_HIP_TORQUE, RobotParams, as_params
 from .physics.simulator import SimConfig
 from .sensors import SensorConfig
@@ -50,6 +52,8 @@ SETTING_KEYS = (
     "initial_state",
     "simulator",
     "max_episode_steps",
+    "robot_error",
+    "push",
 )
 #: settings whose mappings are merged field by field
 SECTION_KEYS = ("sensors", "reward", "initial_state", "simulator")
@@ -71,6 +75,9 @@ class EnvSettings:
         initial_state: the start-state distribution.
         simulator: the simulator's numerical settings.
         max_episode_steps: time limit in control periods, or None.
+        robot_error: the simulated robot's parameter errors, drawn at every reset (none by
+            default; ``robot`` stays the nominal model).
+        push: the hip pushes, or None (default).
     """
 
     robot: RobotParams
@@ -82,6 +89,8 @@ class EnvSettings:
     initial_state: InitialState
     simulator: SimConfig
     max_episode_steps: int | None
+    robot_error: RobotError = RobotError()
+    push: PushConfig | None = None
 
     @classmethod
     def build(cls, config: str | Path | dict[str, Any] = "flat", **overrides: Any) -> EnvSettings:
@@ -209,6 +218,8 @@ def resolve_env_settings(
     elif not isinstance(sim, SimConfig):
         raise ValueError(f"simulator must be a mapping or SimConfig, got {type(sim)}")
     mes = check_max_episode_steps(data.get("max_episode_steps"))
+    robot_error = RobotError.from_setting(data.get("robot_error"))
+    robot_error.check(robot)
     return EnvSettings(
         robot=robot,
         terrain=TerrainSource(data.get("terrain", "flat"), data.get("difficulty", 1.0)),
@@ -219,6 +230,8 @@ def resolve_env_settings(
         initial_state=dataclass_from_mapping(InitialState, data["initial_state"], "initial_state"),
         simulator=sim,
         max_episode_steps=mes,
+        robot_error=robot_error,
+        push=PushConfig.from_setting(data.get("push")),
     )
 
 

@@ -217,7 +217,7 @@ class CompassGaitVectorEnv(VectorEnv):
             final_obs_all = b.observations()
             final_info = b.infos()
             for key in [k for k in final_info if k.startswith("_")]:
-                final_info[key] = terminated | truncated
+                final_info[key] = final_info[key] & (terminated | truncated)
             final_obs = np.full(self.num_envs, None, dtype=object)
             for i in done:
                 final_obs[i] = final_obs_all[i]

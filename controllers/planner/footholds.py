@@ -21,6 +21,7 @@ import numpy as np
 from numba import njit
 
 from envs.physics import model
+from envs.physics.model import touchdown_configuration
 from envs.physics.terrain import Terrain, as_terrain, terrain_height
 
 __all__ = [
@@ -168,22 +169,6 @@ class FootholdRules:
             raise ValueError(
                 f"FootholdRules: need q1_min < q1_max < pi, got {self.q1_min}, {self.q1_max}"
             )
-
-
-def touchdown_configuration(
-    dx: np.ndarray | float, dh: np.ndarray | float, l: float
-) -> tuple[np.ndarray | float, np.ndarray | float]:
-    """Pre-impact ``(q1, q2)`` [rad] that puts the swing foot at ``(dx, dh)`` [m] from the stance
-    foot with both legs at full length ``l`` [m]: ``l (sin q2 - sin(q2 - q1)) = dx``,
-    ``l (cos q2 - cos(q2 - q1)) = dh``. ``NaN`` where the foothold is out of reach."""
-    dx, dh = np.asarray(dx, dtype=np.float64), np.asarray(dh, dtype=np.float64)
-    chord = np.hypot(dx, dh) / (2.0 * l)
-    with np.errstate(invalid="ignore"):
-        q1 = 2.0 * np.arcsin(np.where(chord <= 1.0, chord, np.nan))
-    q2 = np.arctan2(-dh, dx) + 0.5 * q1
-    if q1.ndim == 0:
-        return float(q1), float(q2)
-    return q1, q2
 
 
 def candidate_footholds(

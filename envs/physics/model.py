@@ -1,5 +1,6 @@
 """Equations of motion of the compass-gait biped: ``M, C, G, B``, friction, impact, kinematics,
-energy, momenta and the contact conditions (ground reaction, impulse, friction cone).
+energy, momenta, the hip push and the contact conditions (ground reaction, impulse, friction
+cone).
 
 This module is the single source of the model equations (Manchester et al. 2011, Appendix B, in
 the conventions of the control notes). Every function is compiled with numba and takes the flat
@@ -262,6 +263,28 @@ def swing_foot_velocity(P, q1, q2, q1d, q2d):
     s = q2 - q1
     sd = q2d - q1d
     return l * np.cos(q2) * q2d - l * np.cos(s) * sd, -l * np.sin(q2) * q2d + l * np.sin(s) * sd
+
+
+@_jit
+def hip_push(P, q1, q2, dvx):
+    """Horizontal impulse at the hip that changes the hip's horizontal velocity by ``dvx``
+    [m/s] with the stance foot pinned, at ``(q1, q2)`` [rad].
+
+    The impulse ``p`` [N s] acts through the hip's horizontal Jacobian ``J = (0, l cos q2)``
+    (of :func:`hip_position`): ``M dqd = J' p`` with ``p = dvx / (J M^-1 J')``, so that
+    ``J dqd = dvx``; the ground takes the reaction at the stance foot. The hip's vertical
+    velocity changes by ``-tan(q2) dvx`` (it moves on a circle about the foot).
+
+    Returns ``(dq1d, dq2d, p)``: the jump of the joint rates [rad/s] and the impulse [N s]
+    (positive forwards, towards +x). Scalars only (``|q2| < pi / 2``).
+    """
+    m11, m12, m22 = mass_matrix(P, q1)
+    det = m11 * m22 - m12 * m12
+    j2 = P[PL] * np.cos(q2)
+    # M^-1 J' = j2 (-m12, m11) / det
+    a1, a2 = -m12 * j2 / det, m11 * j2 / det
+    p = dvx / (j2 * a2)
+    return a1 * p, a2 * p, p
 
 
 @_jit

@@ -52,6 +52,12 @@ DEFAULT_SUBSTEP = 2.5e-3
 #: substep ``h`` [s]: a margin below RK4's stability limit 2.785 on the negative real axis
 RK4_DECAY_LIMIT = 2.5
 
+#: the physical parameters a model error perturbs (:meth:`RobotParams.perturbed`): masses,
+#: hip gravitational mass, leg inertia, leg length, centre of mass, hip friction and the motor's
+#: torque constant. Not perturbed: ``g`` (the planet), ``kI`` and ``u_max`` (the controller's
+#: side of the actuator) and the foot geometry (fractions of ``l``, so it scales with ``l``).
+PHYSICAL_PARAMS = ("m", "mH", "mHg", "Ic", "l", "lc", "Fc", "Fv", "ktau")
+
 #: the error for a setting that moved to :class:`RobotParams` (``key``: the field), e.g. the
 #: swing-foot geometry that the simulator and planner settings held
 MOVED_TO_ROBOT = (
@@ -264,6 +270,35 @@ class RobotParams:
         d = self.to_dict()
         d.update(changes)
         return RobotParams.from_dict(d)
+
+    def perturbed(self, errors: dict[str, float]) -> RobotParams:
+        """Copy with relative errors on physical parameters: ``value * (1 + error)``.
+
+        The centre of mass moves with the leg: ``lc`` is scaled by the error of ``l`` and then
+        by its own, so ``lc / l`` changes by ``lc``'s error only; ``retract`` and
+        ``arm_distance`` are fractions of ``l`` and scale with it. A parameter that is zero
+        (``Fc`` of a frictionless robot) stays zero.
+
+        Args:
+            errors: ``{name: relative error}`` for names in :data:`PHYSICAL_PARAMS`, each
+                error a finite number > -1 (``0.05`` is 5 % more).
+
+        Raises:
+            ValueError: an unknown name or a bad error, or a result that is not a valid robot
+                (the message names the parameter and its allowed range; nothing is clipped).
+        """
+        unknown = sorted(set(errors) - set(PHYSICAL_PARAMS), key=str)
+        if unknown:
+            raise ValueError(
+                f"unknown physical parameter(s) {unknown}; allowed: {list(PHYSICAL_PARAMS)}"
+            )
+        for name, e in errors.items():
+            ok = not isinstance(e, bool) and isinstance(e, (int, float, np.integer, np.floating))
+            if not (ok and math.isfinite(e) and e > -1.0):
+                raise ValueError(f"relative error of {name} = {e!r}; allowed: finite > -1")
+        changes = {name: getattr(self, name) * (1.0 + float(e)) for name, e in errors.items()}
+        changes["lc"] = changes.get("lc", self.lc) * (1.0 + float(errors.get("l", 0.0)))
+        return self.replace(**changes)
 
 
 def available_presets() -> list[str]:

@@ -1,5 +1,6 @@
 """Hybrid simulator of the compass-gait biped: the :class:`Simulator` (a batch of walkers stepped
-by control periods), its settings :class:`SimConfig`, and :func:`simulate` for one walker.
+by control periods) and :func:`simulate` for one walker; their settings :class:`SimConfig`
+live in :mod:`envs.physics.sim_config` (imported here too).
 
 The rules of the hybrid model (retractable feet, touchdown, impact checks, failures) are those
 of the compiled kernel, :mod:`envs.physics.kernel`; see also the README section "Simulator".
@@ -11,23 +12,14 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass, field, fields
-from typing import Any, ClassVar
+from dataclasses import dataclass, field
+from typing import Any
 
 import numba
 import numpy as np
 
-from ..config_util import reject_moved_fields
 from . import model
 from .kernel import (
-    C_FACE,
-    C_FALL_H,
-    C_IMPACT,
-    C_MU,
-    C_Q2MAX,
-    C_REACT,
-    C_SUBSTEP,
-    C_TTOL,
     E_FX,
     E_FY,
     E_POST,
@@ -38,7 +30,6 @@ from .kernel import (
     F_NIMP,
     F_STATUS,
     FAILURES,
-    N_C,
     N_E,
     N_F,
     N_O,
@@ -55,89 +46,9 @@ from .kernel import (
     step_parallel,
     step_serial,
 )
-from .params import DEFAULT_SUBSTEP, MOVED_TO_ROBOT, N_PARAMS, RobotParams, as_params
+from .params import N_PARAMS, RobotParams, as_params
+from .sim_config import SimConfig
 from .terrain import Terrain, as_terrain
-
-
-@dataclass(frozen=True)
-class SimConfig:
-    """Simulator settings.
-
-    Attributes:
-        substep: largest RK4 substep [s], in (0, 0.1]; each control period ``dt`` is split
-            into ``ceil(dt / substep)`` equal substeps. A substep longer than the default
-            2.5 ms lowers the largest hip viscous friction the simulator accepts
-            (:meth:`RobotParams.viscous_friction_limit`).
-        fall_height: hip height above the ground below which the walker has fallen, fraction
-            of ``l``, in [0, 1).
-        q2_limit: largest ``|q2|`` [rad] before the walker has fallen, in (0, pi/2].
-        mu: friction coefficient of the feet (``inf`` disables slip checks), > 0.
-        time_tol: touchdown time tolerance [s] of the root finder, in (0, 1e-9].
-        face_tol: clearance jump [m] that marks a foot hitting a vertical face, > 0.
-        check_reaction: check lift-off and slip of the stance foot during the swing phase.
-        check_impact: check the impact impulse and the trailing foot's take-off.
-        max_impacts: most impacts recorded within one control period; more is "stuck".
-
-    The foot geometry (``retract``, ``arm_distance``) is the robot's: :class:`RobotParams`.
-    """
-
-    MOVED_FIELDS: ClassVar[dict[str, str]] = {
-        key: MOVED_TO_ROBOT.format(key=key) for key in ("retract", "arm_distance")
-    }
-
-    substep: float = DEFAULT_SUBSTEP
-    fall_height: float = 0.5
-    q2_limit: float = 1.2
-    mu: float = 1.0
-    time_tol: float = 1e-13
-    face_tol: float = 1e-8
-    check_reaction: bool = True
-    check_impact: bool = True
-    max_impacts: int = 4
-
-    def __new__(cls, *args: Any, **kwargs: Any) -> SimConfig:
-        """Reject the settings that moved to :class:`RobotParams`, naming the replacement."""
-        reject_moved_fields(cls, kwargs)
-        return super().__new__(cls)
-
-    def __post_init__(self) -> None:
-        def req(ok: bool, name: str, allowed: str) -> None:
-            if not ok:
-                raise ValueError(
-                    f"SimConfig.{name} = {getattr(self, name)!r} is out of range; "
-                    f"allowed: {allowed}"
-                )
-
-        for f in fields(self):
-            v = getattr(self, f.name)
-            if f.name in ("check_reaction", "check_impact"):
-                req(isinstance(v, (bool, np.bool_)), f.name, "True or False")
-                continue
-            if f.name == "max_impacts":
-                req(isinstance(v, (int, np.integer)) and 1 <= v <= 64, f.name, "integer 1..64")
-                continue
-            req(isinstance(v, (int, float, np.floating, np.integer)), f.name, "a real number")
-            req(not math.isnan(float(v)), f.name, "not NaN")
-        req(0 < self.substep <= 0.1, "substep", "(0, 0.1] s")
-        req(0 <= self.fall_height < 1, "fall_height", "[0, 1) (fraction of l)")
-        req(0 < self.q2_limit <= math.pi / 2, "q2_limit", "(0, pi/2] rad")
-        req(self.mu > 0, "mu", "> 0 (inf disables the slip check)")
-        req(0 < self.time_tol <= 1e-9, "time_tol", "(0, 1e-9] s")
-        req(0 < self.face_tol < 1e-2, "face_tol", "(0, 0.01) m")
-
-    @classmethod
-    def accurate(cls, **changes: Any) -> SimConfig:
-        """Small substeps (0.25 ms): energy drift below 1e-9 relative over 1 s."""
-        return cls(**{"substep": 2.5e-4, **changes})
-
-    def vector(self) -> np.ndarray:
-        """Flat float64 vector for the kernels (layout: the ``C_*`` constants)."""
-        c = np.zeros(N_C)
-        c[C_SUBSTEP] = self.substep
-        c[C_FALL_H], c[C_Q2MAX], c[C_MU] = self.fall_height, self.q2_limit, self.mu
-        c[C_TTOL], c[C_FACE] = self.time_tol, self.face_tol
-        c[C_REACT], c[C_IMPACT] = float(self.check_reaction), float(self.check_impact)
-        return c
 
 
 # ---------------------------------------------------------------------------- Python API
@@ -212,6 +123,7 @@ class Simulator:
         self._parallel = bool(parallel)
         self._kernel = step_parallel if self._parallel else step_serial
         self._P = np.zeros((n, N_PARAMS))
+        self._param_view = _read_only(self._P)
         self.params: list[RobotParams] = [None] * n  # type: ignore[list-item]
         self.set_params(params)
         self.terrains: list[Terrain] = [None] * n  # type: ignore[list-item]
@@ -386,6 +298,25 @@ class Simulator:
             self._ev[i] = 0.0
             self._out[i] = 0.0
 
+    def push_hip(self, index: int, dv: float) -> float:
+        """Push walker ``index`` at the hip: its hip's horizontal velocity jumps by ``dv`` [m/s]
+        (forwards positive), the stance foot held (:func:`envs.physics.model.hip_push`); returns
+        the impulse [N s]. Positions, time and everything else are unchanged.
+
+        Raises:
+            ValueError: a non-finite ``dv`` or a walker that is not running.
+        """
+        i = self._index(index)
+        if not math.isfinite(dv):
+            raise ValueError(f"dv = {dv!r} must be a finite speed change [m/s]")
+        if self._f[i, F_STATUS] != OK:
+            raise ValueError(f"walker {i} is not running (reset it first)")
+        x = self._x[i]
+        d1, d2, impulse = model.hip_push(self._P[i], x[X_Q1], x[X_Q2], float(dv))
+        x[X_Q1D] += d1
+        x[X_Q2D] += d2
+        return float(impulse)
+
     def _select(self, index: Any) -> np.ndarray:
         if index is None:
             return np.arange(self.num_walkers)
@@ -494,6 +425,13 @@ class Simulator:
         :mod:`envs.physics.kernel`; ``n_impacts`` counts the touchdowns of the last step). Updated
         in place like :attr:`states`."""
         return self._flags
+
+    @property
+    def param_vectors(self) -> np.ndarray:
+        """(N, P) read-only view of every walker's parameter vector
+        (:meth:`RobotParams.vector`, the layout of :mod:`envs.physics.params`), as the kernels
+        read it; :meth:`set_params` updates it in place."""
+        return self._param_view
 
     @property
     def terrain_arrays(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:

@@ -21,7 +21,7 @@ def smoke_config(path: Path, timesteps: int | None = None) -> AgentConfig:
     """A shipped config with tiny batches and budget (same algorithm, env and wrappers).
 
     Residual configs get a smaller budget: every env step also runs the reference controller,
-    whose footstep planning dominates their cost.
+    whose footstep planning dominates their cost. A critic warm-up lasts a quarter of it.
     """
     cfg = load_config(path)
     small = cfg.is_residual
@@ -34,7 +34,7 @@ def smoke_config(path: Path, timesteps: int | None = None) -> AgentConfig:
         n = timesteps or (128 if small else 1200)
         hyper = {
             "n_envs": 2,
-            "learning_starts": n // 3,
+            "learning_starts": 0 if cfg.residual_init == "zero" else n // 3,
             "train_freq": 8,
             "gradient_steps": 2,
             "batch_size": 64,
@@ -42,6 +42,8 @@ def smoke_config(path: Path, timesteps: int | None = None) -> AgentConfig:
         }
     hyper.update(n_timesteps=n, env_kwargs=env_kwargs)
     run = {"eval_freq": n // 2, "eval_episodes": 1 if small else 2, "checkpoint_freq": n // 2}
+    if cfg.critic_warmup:
+        run["critic_warmup"] = n // 4
     return load_config(path, hyper, run)
 
 

@@ -184,3 +184,56 @@ def test_planned_timesteps_round_the_budget_up_to_whole_updates():
     assert cfg.planned_timesteps(start=8192) == 8192  # nothing left to do
     sac = load_config(CONFIG_DIR / "sac_flat.yaml", {"n_timesteps": 600, "train_freq": 16})
     assert sac.planned_timesteps() == 16 * sac.n_envs * -(-600 // (16 * sac.n_envs))
+
+
+@pytest.mark.parametrize(
+    ("run", "hyper", "message"),
+    [
+        ({"residual_int": "zero"}, {}, r"unknown run setting\(s\) residual_int; allowed: .*"),
+        ({"residual_init": "ones"}, {}, "run.residual_init must be one of 'default', 'zero'"),
+        ({"init_log_std": 5}, {}, r"run.init_log_std must be a number in \[-20, 2\] or null"),
+        ({"critic_warmup": -1}, {}, "run.critic_warmup must be a whole number >= 0, got -1"),
+        ({"critic_warmup": 1.5}, {}, "run.critic_warmup must be a whole number >= 0"),
+        (
+            {"init_log_std": -1.0},
+            {"policy_kwargs": {"log_std_init": -2.0}},
+            "run.init_log_std and policy_kwargs.log_std_init both",
+        ),
+        ({"algo": "td3", "init_log_std": -1.0}, {}, "TD3 has no log standard deviation"),
+        ({"scale_ramp": 100}, {}, "run.scale_ramp needs an agents.residual.ResidualWrapper"),
+        ({"algo": "sac", "residual_init": "zero"}, {}, "needs learning_starts: 0 \\(got 100\\)"),
+        (
+            {},
+            {"env_wrapper": {"agents.curriculum.TerrainCurriculum": {"level": 3}}},
+            r"TerrainCurriculum: unknown argument\(s\) level; allowed: min_difficulty, ",
+        ),
+        (
+            {},
+            {"env_wrapper": {"agents.curriculum.TerrainCurriculum": {"promote": 2}}},
+            r"TerrainCurriculum: promote = 2; allowed: a number in \(0, 1\]",
+        ),
+        (
+            {},
+            {"env_wrapper": {"agents.residual.ResidualWrapper": {"scal": 0.3}}},
+            r"ResidualWrapper: unknown argument\(s\) scal; allowed: base, scale, ",
+        ),
+    ],
+)
+def test_residual_recipe_settings_are_checked(run, hyper, message):
+    data = _with("run", **run)
+    data["roughwalk/CompassGaitFlat-v0"].update(hyper)
+    if data["run"]["algo"] != "ppo":
+        data["roughwalk/CompassGaitFlat-v0"].pop("n_steps")
+    with pytest.raises(ConfigError, match=message):
+        config_from_dict(data)
+
+
+def test_residual_recipe_settings_are_kept_in_the_run_record():
+    plain = config_from_dict(GOOD)
+    assert set(plain.to_dict()["run"]).isdisjoint({"residual_init", "critic_warmup"})  # as before
+    cfg = config_from_dict(_with("run", residual_init="zero", critic_warmup=512.0))
+    assert (cfg.residual_init, cfg.init_log_std, cfg.critic_warmup) == ("zero", None, 512)
+    again = config_from_dict(cfg.to_dict())
+    assert (again.residual_init, again.critic_warmup) == ("zero", 512)
+    zero = load_config(CONFIG_DIR / "sac_residual_rough_hard_zero.yaml")
+    assert (zero.residual_init, zero.init_log_std, zero.critic_warmup) == ("zero", -2.0, 10_000)

@@ -35,7 +35,7 @@ def test_the_default_duration_is_the_whole_episode(capsys):
     assert main(["demo", "--no-figures"]) == 0
     out = capsys.readouterr().out
     assert f"in {limit:.2f} s" in out
-    rows = [line for line in out.splitlines() if line.startswith("│")]
+    rows = [line for line in out.splitlines() if line.split() and line.split()[0].isdigit()]
     # three steps on the flat, one down each stair, and on: 11 touchdowns in 10 s; the step in
     # progress at the time limit is the last row, marked as such
     assert "walked: 11 footsteps" in out
@@ -70,3 +70,42 @@ def test_the_gif_is_small(tmp_path, capsys):
         assert im.n_frames == 13 and im.size == (demo.GIF_WIDTH, 320)
         assert im.info["duration"] == 40
     assert gif.stat().st_size < 60_000
+
+
+def test_the_table_shows_the_lyapunov_value_per_footstep_in_both_modes(capsys):
+    """V at each step's start and end, their ratio, the largest |x_perp| and |u|: in replan mode
+    every step after the first starts on its own fresh plan (V start about 0)."""
+    argv = ["demo", "--no-figures", "--duration", "3"]
+    assert main(argv) == 0
+    out = capsys.readouterr().out
+    for header in ("start", "end", "/V start", "|x_perp|", "|u|"):
+        assert header in out
+    assert "replan: V end/start < 1 on 0 of 3 completed footsteps" in out
+    rows = [line.split() for line in out.splitlines() if line.split() and line.split()[0].isdigit()]
+    assert len(rows) == 4 and all(len(r) >= 10 for r in rows)
+    assert all(float(r[4]) < 1e-12 for r in rows)  # V start, replanned at every touchdown
+    assert all(0 < float(r[5]) < 1 for r in rows)  # V end
+    assert all(float(r[8]) <= 15 for r in rows)  # max |u| within the actuator limit
+    assert main([*argv, "--controller-mode", "fixed-plan"]) == 0
+    out = capsys.readouterr().out
+    rows = [line.split() for line in out.splitlines() if line.split() and line.split()[0].isdigit()]
+    # one plan made at the start: later steps start off it (the observer's and the sensors'
+    # errors), so V start is not 0 and the ratio is a number to read
+    assert all(float(r[4]) > 1e-4 for r in rows[1:])
+    assert "fixed-plan: V end/start < 1 on" in out and "V start fell from one footstep" in out
+
+
+def test_plan_steps_needs_the_fixed_plan_mode(capsys):
+    assert main(["demo", "--no-figures", "--plan-steps", "5"]) == 2
+    err = capsys.readouterr().err
+    assert "--plan-steps: applies to --controller-mode fixed-plan only" in err
+    assert main(["demo", "--no-figures", "--controller-mode", "fixed"]) == 2
+    assert "invalid choice: 'fixed'" in capsys.readouterr().err
+
+
+def test_a_fixed_plan_is_sized_for_the_duration():
+    res = demo.rollout(STAIRS, seed=0, duration=2.0, mode="fixed-plan")
+    assert res["config"].mode == "fixed-plan" and res["config"].plan_steps == 3 + 3 + 1
+    res = demo.rollout(STAIRS, seed=0, duration=1.0, mode="fixed-plan", plan_steps=6)
+    assert res["config"].plan_steps == 6
+    assert demo.rollout(STAIRS, seed=0, duration=0.5)["config"].mode == "replan"

@@ -166,3 +166,52 @@ def test_a_table_that_fits_the_terminal_stays_a_table():
     piped = render_table(short, title="t", width=120, terminal=False)
     assert piped.splitlines()[1] == "reference on CompassGaitStairs-v0"
     assert "success 100% (50)" in piped
+
+
+# ---------------------------------------------------------------- the certificate per footstep
+STAIRS = "roughwalk/CompassGaitStairs-v0"
+
+
+def test_the_json_holds_the_lyapunov_values_of_the_reference_policy(tmp_path: Path, capsys):
+    out, table = tmp_path / "fixed.json", tmp_path / "fixed.csv"
+    argv = ["evaluate", "--policy", "reference", "--env", STAIRS, "--episodes", "1"]
+    argv += ["--no-progress", "--controller-mode", "fixed-plan"]
+    assert main([*argv, "--json", str(out), "--csv", str(table)]) == 0
+    assert "fixed-plan: V end/start < 1 on" in capsys.readouterr().out
+    data = json.loads(out.read_text())
+    assert data["controller_mode"] == "fixed-plan"
+    (episode,) = data["episodes"]
+    steps = episode["certificate"]
+    # every touchdown ends a completed footstep; the one in progress at the end is left out
+    assert len(steps) == episode["footsteps"] >= 8
+    assert [s["index"] for s in steps] == list(range(len(steps)))
+    for s in steps:
+        assert s["V_ratio"] == pytest.approx(s["V_end"] / s["V_start"])
+        assert 0 < s["max_xperp_norm"] < 1 and 0 < s["max_abs_u"] <= 15 + 1e-6
+    ratios = [s["V_ratio"] for s in steps]
+    assert episode["V_ratio_max"] == max(ratios)
+    assert episode["V_ratio_below_1"] == pytest.approx(sum(r < 1 for r in ratios) / len(ratios))
+    assert data["summary"]["V_ratio_median"] == episode["V_ratio_median"]
+    row = next(csv.DictReader(open(table)))
+    assert "certificate" not in row and float(row["V_ratio_max"]) == pytest.approx(max(ratios))
+
+
+def test_policies_without_the_transverse_controller_have_no_certificate(tmp_path: Path, capsys):
+    out = tmp_path / "passive.json"
+    argv = ["evaluate", "--policy", "passive", "--env", SLOPE, "--episodes", "1", "--no-progress"]
+    assert main([*argv, "--json", str(out)]) == 0
+    assert "V end/start" not in capsys.readouterr().out
+    data = json.loads(out.read_text())
+    assert data["controller_mode"] is None and data["summary"]["V_ratio_median"] is None
+    assert data["episodes"][0]["certificate"] is None
+
+
+def test_the_controller_mode_is_checked_before_any_episode(capsys, episode_count):
+    argv = ["evaluate", "--env", STAIRS, "--episodes", "1", "--no-progress"]
+    assert main([*argv, "--policy", "passive", "--controller-mode", "fixed-plan"]) == 2
+    assert "--controller-mode: applies to the pd and reference policies" in capsys.readouterr().err
+    assert main([*argv, "--policy", "reference", "--plan-steps", "9"]) == 2
+    assert "--plan-steps: applies to --controller-mode fixed-plan only" in capsys.readouterr().err
+    assert main([*argv, "--policy", "reference", "--controller-mode", "fixed"]) == 2
+    assert "invalid choice: 'fixed'" in capsys.readouterr().err
+    assert episode_count[0] == 0

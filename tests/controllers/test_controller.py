@@ -5,7 +5,13 @@ import math
 import numpy as np
 import pytest
 
-from controllers.controller import ControllerConfig, PDController, TransverseController
+from controllers.controller import (
+    MODES,
+    ControllerConfig,
+    PDController,
+    StepRecord,
+    TransverseController,
+)
 from envs import simulate
 from envs.physics import model
 from envs.physics.simulator import Simulator
@@ -233,3 +239,103 @@ def test_rollout_helper_with_exact_footholds():
     recs = out["records"]
     assert len(recs) == 5 and all(r.fallback is None for r in recs)
     assert all(r.riccati_time < 0.1 for r in recs[:-1])
+
+
+# ---------------------------------------------------------------- the certificate per footstep
+CERT_Z0 = (-0.1, 0.0, 0.0)  # start 0.1 rad^2/s^2 below the planned theta_dot^2
+
+
+@pytest.mark.parametrize("terrain", ["flat", "paper_stairs"])
+def test_fixed_plan_lyapunov_value_falls_from_footstep_to_footstep(terrain):
+    """Fixed plan (the paper's Appendix A setting): V = x_perp' P x_perp, P = Z^-1 of each
+    step's own jump-Riccati solve, falls along every step and from each step's start to the
+    next, from a perturbed start, while above the 1 ms hold's floor."""
+    failure, recs = closed_loop(TransverseController, TERRAINS[terrain], CERT_Z0, steps=6)
+    assert failure is None and all(r.fallback is None for r in recs)
+    # V at the first tick uses P of the first solve at theta+ (the tick is at theta+ exactly)
+    ctrl = TransverseController(
+        "paper", TERRAINS[terrain], ControllerConfig.for_mode("fixed-plan", plan_steps=9)
+    )
+    gait = ctrl.planner.periodic_gait()
+    ctrl.reset(gait.q, gait.qd)
+    z0 = np.asarray(CERT_Z0)
+    assert recs[0].V_start == pytest.approx(z0 @ ctrl.solution.Zinv[0] @ z0, rel=1e-6)
+    V_start = np.array([r.V_start for r in recs])
+    V_end = np.array([r.V_end for r in recs])
+    if terrain == "flat":
+        assert V_start[0] == pytest.approx(0.389, abs=0.005)
+        # along each step: V_end / V_start 0.83-0.88; across each impact V does not rise
+        assert all(0.75 < r.V_ratio < 0.92 for r in recs)
+        assert np.all(V_start[1:] < V_end[:-1])
+        # from one step's start to the next: V falls by more than half (sqrt(V) by 0.68)
+        assert np.all(V_start[1:] / V_start[:-1] < 0.5)
+        norms = [r.max_xperp_norm for r in recs]
+        assert 0.1 <= norms[0] < 0.14 and np.all(np.diff(norms) < 0)
+        assert max(r.max_abs_u for r in recs) < 5.0  # far from the actuator limit (15)
+    else:
+        assert V_start[0] == pytest.approx(0.0795, abs=0.002)
+        # the step before each stair is planned near the actuator limit and saturates it, so
+        # V settles at the hold's floor (about 0.006) after four steps instead of falling on
+        above = V_start > V_FLOOR
+        assert above.sum() == 3
+        assert all(r.V_ratio < 0.9 for r, a in zip(recs, above, strict=True) if a)
+        assert max(r.max_abs_u for r in recs) == pytest.approx(ctrl.robot.u_max)
+    # V_end(k) or V_start(k+1) below V_start(k) at every footstep; V_start itself falls
+    assert np.all(np.minimum(V_end[:-1], V_start[1:]) < V_start[:-1])
+    assert np.all(np.diff(V_start) < 0)
+    assert V_start[-1] < 0.1 * V_start[0]
+
+
+@pytest.mark.parametrize("terrain", ["flat", "paper_stairs"])
+def test_replanning_starts_every_footstep_at_zero(terrain):
+    """Replan mode: each step is planned from its own start state, so x_perp and V start at 0
+    and V only grows over a step: its ratio is no certificate."""
+    failure, recs = closed_loop(
+        TransverseController, TERRAINS[terrain], CERT_Z0, steps=5, replan=True
+    )
+    assert failure is None and all(r.fallback is None for r in recs)
+    assert recs[0].V_start > 0.05  # the first step runs on the plan made at reset
+    for r in recs[1:]:
+        assert r.V_start < 1e-12 and np.abs(r.xperp_start).max() < 1e-6
+        assert r.V_end > 1e-6 and r.V_ratio > 1e6
+        assert 0 < r.max_xperp_norm < 0.06
+    assert ControllerConfig.for_mode("replan").mode == "replan"
+
+
+def test_step_record_certificate_values():
+    rec = StepRecord(index=3, V_start=0.5, V_end=0.25, max_abs_u=2.0, max_xperp_norm=0.1, ticks=9)
+    assert rec.V_ratio == 0.5
+    assert rec.certificate() == {
+        "V_start": 0.5,
+        "V_end": 0.25,
+        "V_ratio": 0.5,
+        "max_xperp_norm": 0.1,
+        "max_abs_u": 2.0,
+    }
+    assert math.isnan(StepRecord(index=0).V_ratio)
+    assert StepRecord(index=0, V_start=0.0, V_end=1e-3).V_ratio == math.inf
+    unknown = StepRecord(index=0, V_start=0.0, V_end=1e-3, ticks=1).certificate()
+    assert unknown["V_ratio"] is None and unknown["V_start"] == 0.0  # JSON has no infinity
+    # a step held with PD or given zero input has no Riccati P: no V
+    pd = StepRecord(
+        index=0, V_start=1.0, V_end=0.5, ticks=5, fallback="PD on the last planned step"
+    )
+    assert pd.certificate()["V_start"] is None and pd.certificate()["max_abs_u"] == 0.0
+    zero = StepRecord(index=0, ticks=5, fallback="zero input").certificate()
+    assert zero["max_xperp_norm"] is None and zero["V_ratio"] is None
+
+
+def test_controller_modes():
+    assert MODES == ("replan", "fixed-plan")
+    assert ControllerConfig().mode == "replan"
+    fixed = ControllerConfig.for_mode("fixed-plan", 10.0, horizon=2)
+    assert fixed.mode == "fixed-plan" and not fixed.replan
+    assert fixed.plan_steps == 15 + 2 + 1  # 1.5 footsteps a second for 10 s, and the horizon
+    assert ControllerConfig.for_mode("fixed-plan", 10.0, plan_steps=5).plan_steps == 5
+    assert ControllerConfig.for_mode("replan", 10.0).plan_steps == ControllerConfig().plan_steps
+    with pytest.raises(ValueError, match="controller mode = 'fixed'; allowed: replan, fixed-plan"):
+        ControllerConfig.for_mode("fixed")
+    with pytest.raises(ValueError, match=r"duration = -1\.0; allowed: a finite number > 0"):
+        ControllerConfig.for_mode("fixed-plan", -1.0)
+    with pytest.raises(ValueError, match="give the mode, not replan"):
+        ControllerConfig.for_mode("replan", replan=False)

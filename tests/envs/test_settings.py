@@ -48,6 +48,8 @@ EXPECTED = {
         "reward": {"progress": 1.0, "energy": 0.05, "failure": 1.0, "work": "absolute"},
         "initial_state": PAPER_START,
         "simulator": {},
+        "robot_error": 0.0,
+        "push": None,
     },
     "stairs": {
         "robot": "paper",
@@ -61,6 +63,8 @@ EXPECTED = {
         "reward": {"progress": 1.0, "energy": 0.05, "failure": 1.0, "work": "absolute"},
         "initial_state": PAPER_START,
         "simulator": {},
+        "robot_error": 0.0,
+        "push": None,
     },
     "rough": {
         "robot": "paper",
@@ -74,6 +78,8 @@ EXPECTED = {
         "reward": {"progress": 1.0, "energy": 0.05, "failure": 1.0, "work": "absolute"},
         "initial_state": PAPER_START,
         "simulator": {},
+        "robot_error": 0.0,
+        "push": None,
     },
     "slope": {
         "robot": "classic",
@@ -102,6 +108,8 @@ EXPECTED = {
             "stance_leg": "A",
         },
         "simulator": {},
+        "robot_error": 0.0,
+        "push": None,
     },
 }
 

@@ -16,7 +16,13 @@ KEYS = ("state", "stance_foot", "stance_leg", "time", "footsteps", "distance", "
 
 
 def _check_info(vinfo: dict, i: int, info: dict) -> None:
-    for key in KEYS:
+    if "push" in info:  # a push in this step: Gymnasium's nested form, masked per sub-env
+        assert vinfo["_push"][i]
+        for key, value in info["push"].items():
+            assert vinfo["push"]["_" + key][i] and vinfo["push"][key][i] == value
+    else:
+        assert "push" not in vinfo or not vinfo["_push"][i]
+    for key in (*KEYS, "robot"):
         if key not in info:  # single envs give the terrain at reset and termination only
             continue
         assert vinfo["_" + key][i]
@@ -34,6 +40,8 @@ def _check_info(vinfo: dict, i: int, info: dict) -> None:
         (True, {}),
         (True, {"sensors": {"latency": 2}}),
         (False, {"observation": "state"}),
+        (False, {"robot_error": 0.05, "push": {"dv": [0.05, 0.2], "every": [0.05, 0.15]}}),
+        (True, {"robot_error": {"l": 0.1, "m": 0.1}, "push": {"dv": 0.1, "at": "mid_stance"}}),
     ],
 )
 def test_vector_equals_single_envs_step_by_step(parallel: bool, kwargs: dict) -> None:
@@ -57,7 +65,7 @@ def test_vector_equals_single_envs_step_by_step(parallel: bool, kwargs: dict) ->
         _check_info(vinfo, i, info)
     rng = np.random.default_rng(0)
     done = np.zeros(n, dtype=bool)
-    ends = 0
+    ends = pushes = 0
     for _ in range(250):
         actions = rng.uniform(-1.2, 1.2, (n, 1)).astype(np.float32)
         vobs, vrew, vterm, vtrunc, vinfo = venv.step(actions)
@@ -72,7 +80,9 @@ def test_vector_equals_single_envs_step_by_step(parallel: bool, kwargs: dict) ->
             _check_info(vinfo, i, info)
             done[i] = term or trunc
             ends += done[i]
+            pushes += "push" in info
     assert ends >= 4  # autoresets were exercised
+    assert pushes >= 3 or "push" not in kwargs
 
 
 def test_native_matches_gymnasium_sync_vector_env() -> None:
