@@ -14,6 +14,9 @@ A spec (``configs/sweeps/*.yaml``)::
         name: PPO s0             # label (default: the baseline's or the run folder's name)
         group: PPO               # training seeds of one agent share a group (IQM across them)
         envs: [rough]            # only these envs (default: all)
+      - policy: reference
+        name: reference fixed-plan
+        options: {controller_mode: fixed-plan}   # options of agents.evaluate.make_eval_env
     envs:
       - name: flat               # label (default: the id without roughwalk/)
         id: roughwalk/CompassGaitFlat-v0
@@ -31,6 +34,7 @@ arguments are passed to the env as they are: the env validates them (and
 from __future__ import annotations
 
 import copy
+import inspect
 import itertools
 import json
 from dataclasses import dataclass, field
@@ -44,7 +48,9 @@ from agents.evaluate import eval_seeds, make_env, make_eval_env
 from agents.policies import BASELINES
 
 SPEC_KEYS = ("name", "description", "episodes", "seed", "policies", "envs")
-POLICY_KEYS = ("policy", "name", "group", "envs")
+POLICY_KEYS = ("policy", "name", "group", "envs", "options")
+#: options of a policy entry: the keyword arguments of ``make_eval_env`` after the env's
+POLICY_OPTIONS = tuple(list(inspect.signature(make_eval_env).parameters)[3:])
 ENV_KEYS = ("name", "id", "kwargs", "sweep")
 ENV_NAMESPACE = "roughwalk/"
 #: model files a run folder stands for, in order of preference (as ``roughwalk compare``)
@@ -65,6 +71,8 @@ class PolicyEntry:
         source: the policy as the spec gives it (a baseline, a model file or a run folder).
         group: the agent it is one training seed of, or None.
         envs: names of the envs it runs on, or None for all.
+        options: keyword arguments of ``agents.evaluate.make_eval_env`` (e.g.
+            ``controller_mode``).
     """
 
     name: str
@@ -72,6 +80,7 @@ class PolicyEntry:
     source: str
     group: str | None = None
     envs: tuple[str, ...] | None = None
+    options: dict[str, Any] = field(default_factory=dict)
 
 
 @dataclass(frozen=True)
@@ -113,6 +122,7 @@ class Cell:
         env_id: Gymnasium id.
         env_kwargs: keyword arguments of ``gym.make``.
         swept: the swept keyword arguments' values of this cell.
+        policy_options: keyword arguments of ``agents.evaluate.make_eval_env``.
     """
 
     key: str
@@ -123,6 +133,7 @@ class Cell:
     env_id: str
     env_kwargs: dict[str, Any]
     swept: dict[str, Any]
+    policy_options: dict[str, Any] = field(default_factory=dict)
 
     @property
     def setting(self) -> str:
@@ -167,7 +178,9 @@ class SweepSpec:
                 for point, kwargs in e.settings():
                     swept = ",".join(f"{k}={_text(v)}" for k, v in point.items())
                     key = f"{p.name}/{e.name}" + (f"[{swept}]" if swept else "")
-                    out.append(Cell(key, p.name, p.policy, p.group, e.name, e.id, kwargs, point))
+                    out.append(
+                        Cell(key, p.name, p.policy, p.group, e.name, e.id, kwargs, point, p.options)
+                    )
         return out
 
     def to_dict(self) -> dict[str, Any]:
@@ -180,6 +193,7 @@ class SweepSpec:
             "policies": [
                 {"name": p.name, "policy": p.policy, "source": p.source, "group": p.group}
                 | ({"envs": list(p.envs)} if p.envs is not None else {})
+                | ({"options": p.options} if p.options else {})
                 for p in self.policies
             ],
             "envs": [
@@ -271,7 +285,15 @@ def _policy_entry(i: int, item: Any) -> PolicyEntry:
         if not isinstance(envs, list) or not envs or not all(isinstance(e, str) for e in envs):
             raise SpecError(f"{where}.envs: must be a non-empty list of env names")
         envs = tuple(envs)
-    return PolicyEntry(name, policy, source, group, envs)
+    options = item.get("options") or {}
+    if not isinstance(options, dict):
+        raise SpecError(f"{where}.options: must be a mapping; keys: {', '.join(POLICY_OPTIONS)}")
+    for key in options:
+        if key not in POLICY_OPTIONS:
+            raise SpecError(
+                f"{where}.options: unknown option {key!r}; allowed: {', '.join(POLICY_OPTIONS)}"
+            )
+    return PolicyEntry(name, policy, source, group, envs, dict(options))
 
 
 def _env_entry(i: int, item: Any) -> EnvEntry:
@@ -421,7 +443,9 @@ def check_spec(spec: SweepSpec) -> None:
                 raise SpecError(f"{prefix}{at}: {' '.join(str(exc).split())}") from None
     for cell in spec.cells():
         try:
-            env, *_ = make_eval_env(cell.policy_spec, cell.env_id, cell.env_kwargs)
+            env, *_ = make_eval_env(
+                cell.policy_spec, cell.env_id, cell.env_kwargs, **cell.policy_options
+            )
             env.close()
         except (ValueError, OSError) as exc:
             raise SpecError(f"{prefix}cell {cell.key}: {' '.join(str(exc).split())}") from None

@@ -77,6 +77,7 @@ def episode_record(cell: Cell, result: Any, total_mass: float, gravity: float) -
         "policy": cell.policy,
         "policy_spec": cell.policy_spec,
         "group": cell.group,
+        "policy_options": cell.policy_options,
         "env": cell.env,
         "env_id": cell.env_id,
         "env_kwargs": cell.env_kwargs,
@@ -95,7 +96,9 @@ def run_task(task: Task) -> Iterator[dict[str, Any]]:
     if cell.policy_spec not in BASELINES:
         set_threads(1)  # one core per task; the same arithmetic in every worker
     with _task_arithmetic():
-        env, policy, _, _ = make_eval_env(cell.policy_spec, cell.env_id, cell.env_kwargs)
+        env, policy, _, _ = make_eval_env(
+            cell.policy_spec, cell.env_id, cell.env_kwargs, **cell.policy_options
+        )
         try:
             base = env.unwrapped
             mass, g = float(base.params.total_mass), float(base.params.g)

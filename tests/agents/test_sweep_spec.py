@@ -65,6 +65,16 @@ def test_dotted_sweep_keys_set_fields_of_mapping_arguments():
     check_spec(s)  # the env accepts them
 
 
+def test_policy_options_reach_the_policy():
+    entry = {"policy": "reference", "name": "fixed", "options": {"controller_mode": "fixed-plan"}}
+    s = spec_from_dict(spec(policies=[entry], envs=[{"id": FLAT}]))
+    assert s.cells()[0].policy_options == {"controller_mode": "fixed-plan"}
+    check_spec(s)
+    bad = spec_from_dict(spec(policies=[{**entry, "policy": "passive"}], envs=[{"id": FLAT}]))
+    with pytest.raises(SpecError, match="cell fixed/CompassGaitFlat-v0: controller_mode: applies"):
+        check_spec(bad)
+
+
 def test_run_folder_resolves_to_its_best_model(tmp_path):
     run = tmp_path / "ppo_flat_s0"
     run.mkdir()
@@ -94,6 +104,7 @@ def test_run_folder_resolves_to_its_best_model(tmp_path):
         ({"envs": [{"id": FLAT}, {"id": FLAT}]}, "the name 'CompassGaitFlat-v0' is used twice"),
         ({"envs": [{"id": FLAT, "terrain": "x"}]}, r"envs\[0\]: unknown key 'terrain'"),
         ({"envs": [{"name": "flat"}]}, r"envs\[0\].id: required"),
+        ({"policies": [{"policy": "pd", "options": {"gain": 2}}]}, "unknown option 'gain'"),
     ],
 )
 def test_bad_spec_form(changes, match):
