@@ -65,6 +65,7 @@ def init_ray(workers: int | None = None, address: str | None = None) -> bool:
         ray.init(address=address, logging_level="ERROR", log_to_driver=True)
     else:
         ray.init(
+            address="local",  # a new instance, even where `ray start` left a cluster running
             num_cpus=workers or os.cpu_count() or 1,
             include_dashboard=False,
             object_store_memory=LOCAL_OBJECT_STORE,
