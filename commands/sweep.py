@@ -74,7 +74,8 @@ def configure(parser: argparse.ArgumentParser) -> None:
     parser.add_argument(
         "--overwrite",
         action="store_true",
-        help="replace the results of another spec in --out (else an error; the same spec resumes)",
+        help="start again: remove the results in --out (without it the same spec resumes and "
+        "another spec is an error)",
     )
     parser.add_argument("--no-plot", action="store_true", help="write no plots")
     parser.add_argument("--no-progress", action="store_true", help="no progress bar")

@@ -106,7 +106,8 @@ def run_sweep(
         address: Ray: a cluster's address (default: a local instance).
         chunk: episodes per task (default: :func:`agents.sweep.tasks.chunk_size`); the records
             do not depend on it.
-        overwrite: replace the results of another spec in ``out`` (else an error).
+        overwrite: start again, removing the results in ``out`` (without it the same spec
+            resumes and another spec is an error).
         progress: show a progress bar.
         plot: write the success plots of swept numeric arguments to ``out/plots/``.
 
