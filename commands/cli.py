@@ -34,6 +34,7 @@ COMMANDS: dict[str, tuple[str, str]] = {
     "compare": ("commands.compare", "baselines versus RL agents on every terrain, one table"),
     "mfpt": ("commands.mfpt", "mean first-passage time (footsteps to failure) against roughness"),
     "basin": ("commands.basin", "sampled basin of attraction of the reference controller"),
+    "sweep": ("commands.sweep", "a grid of policies x envs x held-out courses, with intervals"),
 }
 
 ENV_NAMESPACE = "roughwalk/"

@@ -75,6 +75,7 @@ def test_only_the_module_of_the_command_run_is_imported():
         "compare",
         "mfpt",
         "basin",
+        "sweep",
     }
 
 

@@ -1,0 +1,137 @@
+"""Where a sweep's tasks run: in this process (``serial``) or as Ray tasks (``ray``), on a
+local Ray instance started for the sweep or on an existing cluster.
+
+Both call ``on_records(records)`` in this process as work finishes: the serial backend after
+every episode, the Ray backend after every task (in the order tasks finish). The records do not
+depend on the backend, the number of workers or the tasks' size.
+"""
+
+from __future__ import annotations
+
+import os
+from collections.abc import Callable, Sequence
+from typing import Any
+
+from agents.sweep.tasks import Task, run_task, run_task_list
+
+BACKENDS = ("serial", "ray")
+#: object store of a local Ray instance [bytes]: records are small and nothing large is shared
+LOCAL_OBJECT_STORE = 200 * 1024 * 1024
+RAY_MISSING = (
+    '--backend ray: Ray is not installed; install the sweep extra (pip install -e ".[sweep]", '
+    "or pip install ray) or use --backend serial"
+)
+
+OnRecords = Callable[[list[dict[str, Any]]], None]
+
+
+def run_serial(tasks: Sequence[Task], on_records: OnRecords) -> None:
+    """Run ``tasks`` one after the other in this process.
+
+    Args:
+        tasks: the tasks.
+        on_records: called with each episode's record (a list of one) as it ends.
+    """
+    for task in tasks:
+        for record in run_task(task):
+            on_records([record])
+
+
+def import_ray() -> Any:
+    """The ``ray`` module, or ValueError saying how to install it."""
+    try:
+        import ray
+    except ImportError:
+        raise ValueError(RAY_MISSING) from None
+    return ray
+
+
+def init_ray(workers: int | None = None, address: str | None = None) -> bool:
+    """Connect to Ray: to the cluster at ``address``, or to a new local instance with
+    ``workers`` CPUs (default: all cores). Nothing is done when Ray is already initialised in
+    this process. Returns whether this call started the connection (then
+    ``ray.shutdown()`` is the caller's).
+
+    Args:
+        workers: CPUs of a local instance (tasks run at once), >= 1; not for a cluster.
+        address: a cluster's address (``ray://host:10001``, ``host:6379`` or ``auto``).
+    """
+    ray = import_ray()
+    if ray.is_initialized():
+        return False
+    # no usage reporting from a machine that may have no network, no dashboard server
+    os.environ.setdefault("RAY_USAGE_STATS_ENABLED", "0")
+    if address:
+        ray.init(address=address, logging_level="ERROR", log_to_driver=True)
+    else:
+        ray.init(
+            address="local",  # a new instance, even where `ray start` left a cluster running
+            num_cpus=workers or os.cpu_count() or 1,
+            include_dashboard=False,
+            object_store_memory=LOCAL_OBJECT_STORE,
+            logging_level="ERROR",
+        )
+    return True
+
+
+def run_ray(
+    tasks: Sequence[Task],
+    on_records: OnRecords,
+    workers: int | None = None,
+    address: str | None = None,
+) -> None:
+    """Run ``tasks`` as Ray tasks (one CPU each) on a local instance or a cluster (see
+    :func:`init_ray`); a Ray instance started here is shut down at the end.
+
+    A cluster's nodes need this package installed (the same version): the tasks import it.
+
+    Args:
+        tasks: the tasks.
+        on_records: called with each task's records as the task finishes.
+        workers: CPUs of a local instance (default: all cores).
+        address: a cluster's address, or None for a local instance.
+    """
+    ray = import_ray()
+    if not tasks:
+        return
+    started = init_ray(workers, address)
+    try:
+        remote = ray.remote(num_cpus=1, max_retries=0)(run_task_list)
+        pending = [remote.remote(t) for t in tasks]
+        try:
+            while pending:
+                done, pending = ray.wait(pending, num_returns=1)
+                for ref in done:
+                    on_records(ray.get(ref))
+        except BaseException:
+            for ref in pending:
+                ray.cancel(ref, force=True)
+            raise
+    finally:
+        if started:
+            ray.shutdown()
+
+
+def run_tasks(
+    tasks: Sequence[Task],
+    on_records: OnRecords,
+    backend: str = "serial",
+    workers: int | None = None,
+    address: str | None = None,
+) -> None:
+    """Run ``tasks`` on ``backend`` (``serial`` or ``ray``), passing records to
+    ``on_records`` as they finish.
+
+    Args:
+        tasks: the tasks.
+        on_records: receives each batch of finished records.
+        backend: ``serial`` or ``ray``.
+        workers: Ray: CPUs of a local instance (default: all cores).
+        address: Ray: a cluster's address (default: a local instance).
+    """
+    if backend == "serial":
+        run_serial(tasks, on_records)
+    elif backend == "ray":
+        run_ray(tasks, on_records, workers, address)
+    else:
+        raise ValueError(f"--backend: unknown backend {backend!r}; allowed: {', '.join(BACKENDS)}")
