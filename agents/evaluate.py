@@ -28,8 +28,6 @@ from __future__ import annotations
 
 import csv
 import json
-import os
-import tempfile
 import zipfile
 from collections import Counter
 from collections.abc import Sequence
@@ -44,7 +42,7 @@ import yaml
 import envs  # noqa: F401  (registers the roughwalk ids)
 from agents.config import EVAL_SEED_OFFSET, MAX_SEED, TEST_SEED, ConfigError
 from agents.policies import BASELINES, Policy, make_baseline_policy
-from agents.runs import find_vecnormalize, load_vecnormalize
+from agents.runs import atomic_write_stream, find_vecnormalize, load_vecnormalize
 from agents.trained import TrainedPolicy, load_policy
 from controllers.controller import ControllerConfig, PDController, TransverseController
 
@@ -461,27 +459,12 @@ def evaluate(
     return Evaluation(policy_spec, env_id, env_kwargs, results, mass, g, controller_mode=mode)
 
 
-def _write_atomically(path: str | Path, write: Any) -> None:
-    """Call ``write(file)`` on a temporary file beside ``path``, then rename it to ``path``:
-    an interrupted or failed write leaves no partial file."""
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
-    try:
-        with os.fdopen(fd, "w", newline="") as fh:
-            write(fh)
-        os.replace(tmp, path)
-    except BaseException:
-        Path(tmp).unlink(missing_ok=True)
-        raise
-
-
 def write_json(evaluations: Sequence[Evaluation], path: str | Path) -> None:
     """Write the ``evaluations`` with their per-episode results to ``path`` as JSON (one
     object for one evaluation, else a list); the file appears complete or not at all."""
     data = [ev.to_dict() for ev in evaluations]
     text = json.dumps(data[0] if len(data) == 1 else data, indent=2) + "\n"
-    _write_atomically(path, lambda fh: fh.write(text))
+    atomic_write_stream(path, lambda fh: fh.write(text))
 
 
 def write_csv(evaluations: Sequence[Evaluation], path: str | Path) -> None:
@@ -498,7 +481,7 @@ def write_csv(evaluations: Sequence[Evaluation], path: str | Path) -> None:
             for e in ev.episodes:
                 writer.writerow([ev.policy, ev.env_id, kw, *(getattr(e, n) for n in names)])
 
-    _write_atomically(path, write)
+    atomic_write_stream(path, write)
 
 
 def read_monitor_logs(folder: str | Path) -> np.ndarray:

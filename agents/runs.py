@@ -25,7 +25,7 @@ import tempfile
 import zipfile
 from collections.abc import Callable
 from pathlib import Path
-from typing import Any
+from typing import Any, TextIO
 
 import yaml
 
@@ -53,6 +53,19 @@ def atomic_write(path: str | Path, write: Callable[[Path], Any]) -> Path:
     finally:
         tmp.unlink(missing_ok=True)
     return path
+
+
+def atomic_write_stream(path: str | Path, write: Callable[[TextIO], Any]) -> Path:
+    """Write the text file ``path`` all or nothing (see :func:`atomic_write`), creating its
+    folder: ``write(fh)`` writes to an open text file (UTF-8, no newline translation)."""
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+
+    def write_file(tmp: Path) -> None:
+        with open(tmp, "w", encoding="utf-8", newline="") as fh:
+            write(fh)
+
+    return atomic_write(path, write_file)
 
 
 def atomic_write_text(path: str | Path, text: str) -> Path:

@@ -34,7 +34,8 @@ from typing import Any
 
 import numpy as np
 
-from agents.evaluate import _write_atomically
+from agents.runs import atomic_write_stream
+from agents.stats import wilson_interval
 from commands.cli import (
     CONTROLLER_KERNELS,
     SIMULATOR_KERNELS,
@@ -218,7 +219,12 @@ def run(args: argparse.Namespace) -> int:
     ref = periodic_reference(args.robot)
     samples = sample_basin(ref, radii, args.per_radius, args.seed, args.steps, args.v_tol)
     t_shells = time.perf_counter() - t0
-    rows = converged_fractions(samples, args.confidence)
+    rows = converged_fractions(samples)
+    for row in rows:
+        interval = (None, None)
+        if row["starts"]:
+            interval = wilson_interval(row["converged"], row["starts"], args.confidence)
+        row["low"], row["high"] = interval
     pct = round(100 * args.confidence)
     for row in rows:
         print(
@@ -293,14 +299,14 @@ def run(args: argparse.Namespace) -> int:
         "samples": records,
     }
     text = json.dumps(data, indent=1)
-    _write_atomically(out / "basin.json", lambda fh: fh.write(text + "\n"))
+    atomic_write_stream(out / "basin.json", lambda fh: fh.write(text + "\n"))
 
     def write_csv(fh: Any) -> None:
         writer = csv.DictWriter(fh, fieldnames=list(records[0]))
         writer.writeheader()
         writer.writerows(records)
 
-    _write_atomically(out / "basin.csv", write_csv)
+    atomic_write_stream(out / "basin.csv", write_csv)
     _plot_fraction(rows, level, out / "basin_fraction.png", args.confidence)
     for name, (ga, gb, ss) in slices.items():
         _plot_slice(ref, name, ga, gb, ss, level, radii, out / f"basin_slice_{name}.png")

@@ -25,13 +25,11 @@ import argparse
 import csv
 import json
 import math
-import os
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
-from agents.evaluate import _write_atomically
 from agents.mfpt import (
     CENSORED,
     DEFAULT_ENV,
@@ -41,6 +39,7 @@ from agents.mfpt import (
     mfpt_sweep,
 )
 from agents.policies import BASELINES
+from agents.runs import atomic_write, atomic_write_stream
 from commands.cli import (
     CONTROLLER_KERNELS,
     SIMULATOR_KERNELS,
@@ -234,13 +233,10 @@ def save_figure(fig: Any, path: Path) -> None:
     import matplotlib.pyplot as plt
 
     path.parent.mkdir(parents=True, exist_ok=True)
-    tmp = path.with_name(f".{path.name}.tmp.png")
     try:
         fig.tight_layout()
-        fig.savefig(tmp, dpi=120)
-        os.replace(tmp, path)
+        atomic_write(path, lambda tmp: fig.savefig(tmp, format="png", dpi=120))
     finally:
-        tmp.unlink(missing_ok=True)
         plt.close(fig)
 
 
@@ -292,7 +288,7 @@ def run(args: argparse.Namespace) -> int:
         "mfpt": "1/p footsteps (the failing one counted); p = failures / footsteps attempted",
     }
     text = json.dumps({"settings": settings, "levels": [r.to_dict() for r in results]}, indent=1)
-    _write_atomically(out / "mfpt.json", lambda fh: fh.write(text + "\n"))
+    atomic_write_stream(out / "mfpt.json", lambda fh: fh.write(text + "\n"))
 
     def write_csv(fh: Any) -> None:
         writer = csv.DictWriter(fh, fieldnames=CSV_COLUMNS)
@@ -300,7 +296,7 @@ def run(args: argparse.Namespace) -> int:
         for r in results:
             writer.writerow(_row(r))
 
-    _write_atomically(out / "mfpt.csv", write_csv)
+    atomic_write_stream(out / "mfpt.csv", write_csv)
     plot_mfpt(results, out / "mfpt.png", leg)
     plot_survival(results, out / "mfpt_survival.png")
     print(f"wrote {out}/mfpt.json, mfpt.csv, mfpt.png and mfpt_survival.png")

@@ -236,24 +236,10 @@ def sample_basin(
     return out
 
 
-def _wilson(successes: int, n: int, confidence: float = 0.95) -> tuple[float, float]:
-    # TODO at merge: the shared Wilson interval of the statistics module replaces this one
-    if n == 0:
-        return (0.0, 1.0)
-    zq = stats.norm.ppf(0.5 + confidence / 2)
-    p = successes / n
-    den = 1 + zq * zq / n
-    mid = (p + zq * zq / (2 * n)) / den
-    half = zq * math.sqrt(p * (1 - p) / n + zq * zq / (4 * n * n)) / den
-    return (max(0.0, float(mid - half)), min(1.0, float(mid + half)))
-
-
-def converged_fractions(
-    samples: Sequence[BasinSample], confidence: float = 0.95
-) -> list[dict[str, Any]]:
+def converged_fractions(samples: Sequence[BasinSample]) -> list[dict[str, Any]]:
     """Per perturbation size ``r = sqrt(V0)`` (rounded to 12 digits), in increasing ``r``:
     ``starts`` (perturbations with a post-impact state; ``no_state``: those without, left
-    out), ``converged``, the ``fraction`` and its Wilson interval ``low, high``."""
+    out), ``converged`` and the ``fraction`` (intervals: ``agents.stats.wilson_interval``)."""
     groups: dict[float, list[BasinSample]] = {}
     for s in samples:
         groups.setdefault(round(math.sqrt(s.V0), 12), []).append(s)
@@ -261,7 +247,6 @@ def converged_fractions(
     for r in sorted(groups):
         g = [s for s in groups[r] if s.end != NO_STATE]
         k = sum(s.converged for s in g)
-        lo, hi = _wilson(k, len(g), confidence)
         rows.append(
             {
                 "r": r,
@@ -269,8 +254,6 @@ def converged_fractions(
                 "no_state": len(groups[r]) - len(g),
                 "converged": k,
                 "fraction": k / len(g) if g else math.nan,
-                "low": lo,
-                "high": hi,
             }
         )
     return rows
