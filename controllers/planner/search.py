@@ -31,7 +31,9 @@ from .footholds import FootholdChains, TerrainMap, touchdown_configuration
 from .plan import PeriodicGait, Plan, StepPlan
 from .problem import (
     BatchProblem,
+    BudgetExhausted,
     FixedStep,
+    SearchBudget,
     StepEvaluator,
     batch_row,
     gait_reference,
@@ -80,6 +82,8 @@ class StepSearch:
         chains: the planner's foothold-chain search.
         horizon: steps to plan.
         previous_plan: the plan made at the previous footstep (warm starts), or None.
+        max_evaluations: step evaluations the search may spend (default
+            ``config.max_evaluations``).
     """
 
     def __init__(
@@ -92,6 +96,7 @@ class StepSearch:
         chains: FootholdChains,
         horizon: int,
         previous_plan: Plan | None,
+        max_evaluations: int | None = None,
     ):
         self.params, self.config, self.tmap = params, config, tmap
         self.P = params.vector()
@@ -102,6 +107,12 @@ class StepSearch:
         self.prev = list(previous_plan.steps) if previous_plan is not None else []
         self.horizon = horizon
         self.budget = 3 * horizon + 2 * config.candidates  # step solves left
+        self.evaluations = SearchBudget(
+            config.max_evaluations if max_evaluations is None else max_evaluations,
+            config.time_budget,
+        )
+        self.path: list[StepPlan] = []  # the steps of the branch being searched
+        self.partial: list[StepPlan] = []  # the feasible steps before the deepest failure
         self.fresh = False  # the current option ran an optimisation
         self.deepest: PlanningError | None = None  # the failure furthest along the horizon
         # a step optimisation of this call has failed: from then on, when replanning (the
@@ -116,13 +127,22 @@ class StepSearch:
         theta_dot_plus)`` [rad, rad, -, rad/s] with the stance foot at ``stance`` [m].
 
         Raises:
-            PlanningError: no feasible plan (the deepest failure of the search).
+            PlanningError: no feasible plan (the deepest failure of the search), with the
+                feasible steps before it (``partial``) and the evaluations spent.
         """
         H = self.horizon
         reach = self.chains.reach(self.tmap, stance[0], H)
-        if reach < H:  # no chain of admissible footholds that long: no search can succeed
-            raise PlanningError(reach, "foothold", self.chains.reach_break(self.tmap, stance[0], H))
-        return self._steps(0, start, stance)
+        try:
+            if reach < H:  # no chain of admissible footholds that long: no search can succeed
+                raise PlanningError(
+                    reach, "foothold", self.chains.reach_break(self.tmap, stance[0], H)
+                )
+            return self._steps(0, start, stance)
+        except PlanningError as exc:
+            exc.partial = list(self.partial)
+            exc.evaluations = self.evaluations.used
+            exc.budget_exhausted = self.evaluations.exhausted
+            raise
 
     def _steps(self, j: int, start: tuple, stance: tuple[float, float]) -> list[StepPlan]:
         """Depth-first search over footholds: steps ``j .. H-1`` from ``start``."""
@@ -132,6 +152,8 @@ class StepSearch:
         for step in self._step_options(j, start, stance):
             if isinstance(step, PlanningError):
                 err = step
+                if self.deepest is None or err.step > self.deepest.step:
+                    self.partial = list(self.path[:j])
                 break
             nxt = (
                 step.theta_minus - step.coeffs[-1],
@@ -139,11 +161,12 @@ class StepSearch:
                 step.slope_plus,
                 step.delta * step.thetadot_minus,
             )
+            self.path[j:] = [step]
             try:
                 return [step, *self._steps(j + 1, nxt, step.foothold)]
             except PlanningError as e:
                 err = e
-                if self.budget <= 0:
+                if self.budget <= 0 or self.evaluations.exhausted:
                     break
         if self.deepest is None or (err is not None and err.step > self.deepest.step):
             self.deepest = err
@@ -177,7 +200,7 @@ class StepSearch:
         rounds = (1.0, 10.0)
         for wscale, i in [(w, i) for w in rounds for i in order]:
             sm.wscale = wscale
-            if self.budget <= 0:
+            if self.budget <= 0 or self.evaluations.exhausted:
                 break
             self.budget -= 1
             self.fresh = False  # set when an optimisation runs (reused solutions cost nothing)
@@ -213,10 +236,13 @@ class StepSearch:
                 else:
                     x02 = memo.hints.get(_hint_key(fh, fx2.foothold), x02)
             ev, ok = None, False
-            if fx2 is not None:
-                ev, ok = self._solve_pair(fx, x0, fx2, x02, keep)
-            if not ok:
-                ev, ok = self._solve(fx, x0, keep)
+            try:
+                if fx2 is not None:
+                    ev, ok = self._solve_pair(fx, x0, fx2, x02, keep)
+                if not ok:
+                    ev, ok = self._solve(fx, x0, keep)
+            except BudgetExhausted:
+                break
             if not self.fresh:
                 self.budget += 1
             if ok:
@@ -225,10 +251,11 @@ class StepSearch:
                 continue
             worst, name = worst_violation(ev["groups"])
             best_fail = max(best_fail, (worst, name, f"foothold x = {fh[0]:.3f} m"))
+        spent = self.budget <= 0 or self.evaluations.exhausted
         yield PlanningError(
             j,
             best_fail[1] or "search budget exhausted",
-            best_fail[2] + ("" if self.budget > 0 else "; search budget exhausted"),
+            "; ".join(filter(None, (best_fail[2], "search budget exhausted" if spent else ""))),
         )
 
     def _candidates(
@@ -312,7 +339,7 @@ class StepSearch:
             e2 = sm.evaluate_batch(fx2, X[:, n:], slope=e1["slope_plus"], thetadot_plus=thd2)
             return e1["cost"] + e2["cost"], np.concatenate([e1["g"], e2["g"]], axis=1), e1
 
-        prob = BatchProblem(batch)
+        prob = BatchProblem(batch, self.evaluations)
         key = self._problem_key(fx, fx2)
         if key in memo.failed:
             return memo.failed[key], False
@@ -357,7 +384,7 @@ class StepSearch:
             ev = sm.evaluate_batch(fx, X)
             return ev["cost"], ev["g"], ev
 
-        prob = BatchProblem(batch)
+        prob = BatchProblem(batch, self.evaluations)
 
         def run(xs):
             x = prob.minimize(xs, self.config.max_iter, _FTOL, self.struggling)
