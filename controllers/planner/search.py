@@ -252,10 +252,11 @@ class StepSearch:
             worst, name = worst_violation(ev["groups"])
             best_fail = max(best_fail, (worst, name, f"foothold x = {fh[0]:.3f} m"))
         spent = self.budget <= 0 or self.evaluations.exhausted
+        note = "search budget exhausted" if spent and best_fail[1] else ""
         yield PlanningError(
             j,
             best_fail[1] or "search budget exhausted",
-            "; ".join(filter(None, (best_fail[2], "search budget exhausted" if spent else ""))),
+            "; ".join(filter(None, (best_fail[2], note))),
         )
 
     def _candidates(
