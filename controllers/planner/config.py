@@ -92,6 +92,11 @@ class PlannerConfig:
         lookahead: 1 to optimise each step jointly with the next one (only the first is kept;
             anticipates drops and rises; slower), 2 to do so only where this step and the next
             change height by more than ``lookahead_rise`` [m] together, 0 never.
+        energy_horizon: 0 (default): each step's end speed is the gait's, corrected by the
+            height the next step gains or loses; n >= 1: the speed that reaches the gait's end
+            speed ``n`` steps later over footholds ``step_length`` apart, backwards through the
+            gait step's closed-form reduced dynamics and impact loss (a rise further ahead
+            speeds up the current step).
         candidates: footholds tried per step before giving up.
         candidate_spacing: least spacing between the footholds tried [m].
 
@@ -142,6 +147,7 @@ class PlannerConfig:
     time_budget: float = 0.0
     lookahead: int = 2
     lookahead_rise: float = 0.002
+    energy_horizon: int = 0
     candidates: int = 4
     candidate_spacing: float = 0.01
 
@@ -167,6 +173,7 @@ class PlannerConfig:
             "max_evaluations": 1,
             "candidates": 1,
             "lookahead": 0,
+            "energy_horizon": 0,
         }
         for name, lo in ints.items():
             v = getattr(self, name)

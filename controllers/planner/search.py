@@ -282,11 +282,15 @@ class StepSearch:
     def _end_speed(self, foothold: tuple[float, float], q1m: float) -> float:
         """End-of-step ``theta_dot`` to aim at: the gait's, corrected by the potential energy the
         next step will gain or lose (slow down before a drop, speed up before a rise)."""
-        gait = self.gait
-        dh = float(self.tmap.height(foothold[0] + self.config.step_length)) - foothold[1]
+        gait, cfg = self.gait, self.config
         m22 = model.mass_matrix(self.P, q1m)[2]
-        f = gait.step.thetadot_minus**2 + 2.0 * model.weight(self.P) * dh / m22
-        return math.sqrt(max(f, (1.5 * self.config.min_thetadot) ** 2))
+        rise = 2.0 * model.weight(self.P) / m22  # theta_dot^2 a metre of rise costs
+        if cfg.energy_horizon > 0:
+            f = _energy_target(gait, self.tmap, foothold, cfg.step_length, cfg.energy_horizon, rise)
+        else:
+            dh = float(self.tmap.height(foothold[0] + cfg.step_length)) - foothold[1]
+            f = gait.step.thetadot_minus**2 + rise * dh
+        return math.sqrt(max(f, (1.5 * cfg.min_thetadot) ** 2))
 
     def _theta_target(self, theta_plus: float) -> float:
         """Preferred touchdown ``q2`` for a step starting at ``theta_plus``: the gait's, moved by
@@ -423,6 +427,31 @@ class StepSearch:
             memo.failed[key] = ev
             self.struggling = self.may_stall
         return ev, ok2
+
+
+def _energy_target(
+    gait: PeriodicGait,
+    tmap: TerrainMap,
+    foothold: tuple[float, float],
+    step_length: float,
+    steps: int,
+    rise: float,
+) -> float:
+    """End-of-step ``theta_dot^2`` [rad^2/s^2] that reaches the gait's end speed ``steps``
+    steps after a step ending on ``foothold``, over footholds ``step_length`` apart: backward
+    through the closed-form map of the gait's step (``theta_dot-^2 = psi delta^2
+    theta_dot-^2 + Gam`` of the reduced dynamics, the impact's loss included), each step's rise
+    costing ``rise`` per metre."""
+    st = gait.step
+    a = float(st.psi_grid[-1]) * st.delta**2  # end speed^2 -> next end speed^2, on the flat
+    gam = float(st.gam_grid[-1])
+    h = [foothold[1]] + [
+        float(tmap.height(foothold[0] + k * step_length)) for k in range(1, steps + 1)
+    ]
+    f = st.thetadot_minus**2
+    for k in range(steps, 0, -1):
+        f = (f - gam + rise * (h[k] - h[k - 1])) / a
+    return f
 
 
 def _hint_key(stance: tuple[float, float], foothold: tuple[float, float]) -> tuple:
