@@ -157,8 +157,17 @@ class GaitPlanner:
     ) -> Plan:
         """The least-violating steps from the post-impact ``state`` (the last resort when no
         feasible plan exists; see :mod:`controllers.planner.least_violation`): up to
-        ``horizon`` steps, each with its worst violation in ``Plan.violations``. Arguments as
-        for :meth:`plan`; the plan may have fewer steps than asked, or none.
+        ``horizon`` steps, each with its worst violation in ``Plan.violations``; the plan may
+        have fewer steps than asked, or none.
+
+        Args:
+            terrain: the terrain, as for :meth:`plan`.
+            state: actual post-impact ``(q, qd)`` [rad, rad/s].
+            stance_foot: stance-foot position ``(x, y)`` [m].
+            horizon: number of steps, an integer >= 1.
+            previous_plan: as for :meth:`plan` (``None`` forgets the solved step problems).
+            max_evaluations: step evaluations this call may spend (at most
+                ``config.max_evaluations``), an integer >= 1.
 
         Raises:
             PlanningError: ``theta_dot`` not positive after the impact (nothing to track).
