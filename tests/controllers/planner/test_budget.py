@@ -71,3 +71,13 @@ def test_relaxed_and_least_violating_plans_follow_open_loop_pfl(planners):
     with pytest.raises(ValueError, match="no_such_field"):
         base.relaxed(no_such_field=1.0)
     assert np.all(np.isfinite([s.duration for s in lv]))
+
+
+def test_a_process_time_bound_stops_the_search(planners):
+    """The optional time bound (off by default): a bound already spent when the search starts
+    stops it before its first evaluation."""
+    gait = planners["paper"].periodic_gait()
+    pl = GaitPlanner("paper", {"time_budget": 1e-12})
+    with pytest.raises(PlanningError) as info:
+        pl.plan(Terrain.flat(), (gait.q, gait.qd), (0.0, 0.0), horizon=2)
+    assert info.value.budget_exhausted and info.value.evaluations == 0
