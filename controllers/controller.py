@@ -164,11 +164,12 @@ class ControllerConfig:
             ``duration_max`` 3 s; then the previous plan; then the least-violating steps. An
             empty list gives the plain chain (shorter horizon, PD on a single step).
         replan_evaluations: step evaluations (see :attr:`PlannerConfig.max_evaluations`) the
-            planner calls of one footstep may spend together, the full problem and the
+            planner calls of one replanning may spend together, the full problem and the
             relaxations; each call gets what is left (at most the planner's own
             ``max_evaluations``), the least-violating steps get the planner's own budget. A
             deterministic bound on the replanning time (about 55 us per evaluation on one
-            core), >= 1.
+            core), >= 1. The plan at :meth:`TransverseController.reset` (nothing to fall back
+            on) runs its whole search.
     """
 
     horizon: int = 3
@@ -440,6 +441,7 @@ class TransverseController:
         single: list[StepPlan] = []  # the first lone step found (held with PD if nothing else)
         notes: list[str] = []
         left = self.config.replan_evaluations
+        cap = self.planner.config.max_evaluations
         for level in (None, *self.config.fallbacks):
             name = "full problem" if level is None else _fallback_name(level)
             rec.degradations.append(name)
@@ -468,7 +470,7 @@ class TransverseController:
                         self._stance,
                         horizon=n,
                         previous_plan=previous,
-                        max_evaluations=left,
+                        max_evaluations=None if previous is None else min(left, cap),
                     )
                     left -= plan.evaluations
             except PlanningError as exc:

@@ -83,10 +83,11 @@ class PlannerConfig:
             only), post-impact slope deviation).
         max_iter: SLSQP iterations per step.
         max_evaluations: step evaluations (rows of the compiled step kernel: SLSQP points and
-            their forward-difference neighbours, global-search samples) one planning call may
-            spend; the search then stops and reports the best it found (a deterministic,
-            machine-independent budget).
-        time_budget: process time one planning call may spend [s] (``time.process_time``);
+            their forward-difference neighbours, global-search samples) one replanning call (one
+            with a previous plan to fall back on) may spend; the search then stops and reports
+            the best it found (a deterministic, machine-independent budget). A plan from
+            scratch runs its whole search.
+        time_budget: process time one replanning call may spend [s] (``time.process_time``);
             0 for no time bound (the default). A time bound cuts searches at a point that
             depends on the machine and its load: same seed, same result no longer holds.
         lookahead: 1 to optimise each step jointly with the next one (only the first is kept;

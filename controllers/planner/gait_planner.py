@@ -22,6 +22,7 @@ from .search import StepSearch, StepSolutions
 
 __all__ = ["GaitPlanner"]
 
+_UNBOUNDED = 2**62  # evaluations of a search without a budget
 _SOLUTIONS_LIMIT = 4096  # solved step problems kept while replanning before they are forgotten
 
 
@@ -128,8 +129,9 @@ class GaitPlanner:
                 terrain, start state, footholds and weights, to 1e-10) are reused after one
                 feasibility check instead of being optimised again; with ``None`` the planner
                 forgets them, so a call without a previous plan depends on its arguments only.
-            max_evaluations: step evaluations this call may spend (default and upper bound:
-                ``config.max_evaluations``), an integer >= 1.
+            max_evaluations: step evaluations this call may spend, an integer >= 1 (default:
+                ``config.max_evaluations`` when replanning, i.e. with a ``previous_plan``; a
+                plan from scratch runs its whole search).
 
         Raises:
             PlanningError: no feasible step (names the step and the violated constraint; its
@@ -166,16 +168,18 @@ class GaitPlanner:
             stance_foot: stance-foot position ``(x, y)`` [m].
             horizon: number of steps, an integer >= 1.
             previous_plan: as for :meth:`plan` (``None`` forgets the solved step problems).
-            max_evaluations: step evaluations this call may spend (at most
-                ``config.max_evaluations``), an integer >= 1.
+            max_evaluations: step evaluations this call may spend, an integer >= 1 (default:
+                no bound; the search is bounded by construction, ``horizon x candidates`` step
+                problems of a coarse global search and 40 least-squares evaluations each).
 
         Raises:
             PlanningError: ``theta_dot`` not positive after the impact (nothing to track).
             ValueError: as for :meth:`plan`.
         """
         t0 = time.perf_counter()
+        bound = _UNBOUNDED if max_evaluations is None else max_evaluations
         search, start, stance = self._search(
-            terrain, state, stance_foot, horizon, previous_plan, max_evaluations
+            terrain, state, stance_foot, horizon, previous_plan, bound
         )
         steps, worst = least_violation_steps(search, start, stance)
         plan = Plan(steps, self.params, self.config)
@@ -187,9 +191,9 @@ class GaitPlanner:
     def _search(self, terrain, state, stance_foot, horizon, previous_plan, max_evaluations):
         """The checked arguments of a planning call as ``(StepSearch, start, stance)``."""
         cfg = self.config
-        budget = cfg.max_evaluations
+        budget = None
         if max_evaluations is not None:
-            budget = min(budget, integer_setting("max_evaluations", max_evaluations, 1))
+            budget = integer_setting("max_evaluations", max_evaluations, 1)
         H = cfg.horizon if horizon is None else integer_setting("horizon", horizon, 1)
         try:
             q = np.asarray(state[0], dtype=float).reshape(-1)

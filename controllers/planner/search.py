@@ -43,6 +43,7 @@ from .problem import (
 __all__ = ["StepSearch", "StepSolutions"]
 
 _FTOL = 1e-7  # SLSQP tolerance on the cost of a step problem
+_UNBOUNDED = 2**62  # evaluations of a search without a budget
 
 
 class StepSolutions:
@@ -82,8 +83,8 @@ class StepSearch:
         chains: the planner's foothold-chain search.
         horizon: steps to plan.
         previous_plan: the plan made at the previous footstep (warm starts), or None.
-        max_evaluations: step evaluations the search may spend (default
-            ``config.max_evaluations``).
+        max_evaluations: step evaluations the search may spend (default: when replanning,
+            ``config.max_evaluations``, the whole search otherwise).
     """
 
     def __init__(
@@ -107,9 +108,13 @@ class StepSearch:
         self.prev = list(previous_plan.steps) if previous_plan is not None else []
         self.horizon = horizon
         self.budget = 3 * horizon + 2 * config.candidates  # step solves left
+        self.may_stall = previous_plan is not None
+        # the budget bounds replanning (a previous plan is there to fall back on); a plan from
+        # scratch runs its whole search unless the call sets a budget
+        if max_evaluations is None:
+            max_evaluations = config.max_evaluations if self.may_stall else _UNBOUNDED
         self.evaluations = SearchBudget(
-            config.max_evaluations if max_evaluations is None else max_evaluations,
-            config.time_budget,
+            max_evaluations, config.time_budget if self.may_stall else 0.0
         )
         self.path: list[StepPlan] = []  # the steps of the branch being searched
         self.partial: list[StepPlan] = []  # the feasible steps before the deepest failure
@@ -118,7 +123,6 @@ class StepSearch:
         # a step optimisation of this call has failed: from then on, when replanning (the
         # previous plan is there to fall back on), stalled SLSQP runs end early
         self.struggling = False
-        self.may_stall = previous_plan is not None
 
     def run(
         self, start: tuple[float, float, float, float], stance: tuple[float, float]

@@ -13,29 +13,30 @@ WALL = Terrain.stairs([0.33], [0.02])
 LARGEST_BATCH = 82  # the coarse global search: 81 samples and the start
 
 
-def failing_search(planner, gait):
+def failing_search(planner, gait, **kwargs):
     with pytest.raises(PlanningError) as info:
-        planner.plan(WALL, (gait.q, gait.qd), (0.0, 0.0), horizon=4)
+        planner.plan(WALL, (gait.q, gait.qd), (0.0, 0.0), horizon=4, **kwargs)
     return info.value
 
 
 def test_the_evaluation_budget_bounds_a_failing_search(planners):
     gait = planners["paper"].periodic_gait()
-    cut = failing_search(GaitPlanner("paper", {"max_evaluations": 1000}), gait)
+    # replanning (a previous plan to fall back on): the planner's budget applies
+    pl = GaitPlanner("paper", {"max_evaluations": 1000})
+    previous = pl.plan(Terrain.flat(), (gait.q, gait.qd), (0.0, 0.0), horizon=4)
+    cut = failing_search(pl, gait, previous_plan=previous)
     assert cut.budget_exhausted and "search budget exhausted" in str(cut)
     assert 1000 <= cut.evaluations < 1000 + LARGEST_BATCH
-    # a call may ask for less than its planner's budget, never more
-    pl = GaitPlanner("paper", {"max_evaluations": 1000})
-    with pytest.raises(PlanningError) as info:
-        pl.plan(WALL, (gait.q, gait.qd), (0.0, 0.0), horizon=4, max_evaluations=300)
-    assert info.value.budget_exhausted and info.value.evaluations < 300 + LARGEST_BATCH
-    again = failing_search(GaitPlanner("paper", {"max_evaluations": 1000}), gait)
+    again = failing_search(pl, gait, previous_plan=previous)
     assert (again.evaluations, again.step, str(again)) == (cut.evaluations, cut.step, str(cut))
+    # a call may set its own budget (also for a plan from scratch)
+    small = failing_search(pl, gait, max_evaluations=300)
+    assert small.budget_exhausted and 300 <= small.evaluations < 300 + LARGEST_BATCH
 
 
 def test_a_failed_search_keeps_the_feasible_steps_before_the_failure(planners):
     gait = planners["paper"].periodic_gait()
-    exc = failing_search(GaitPlanner("paper", {"max_evaluations": 10**6}), gait)
+    exc = failing_search(planners["paper"], gait)  # from scratch: the whole search
     assert not exc.budget_exhausted and exc.evaluations > 3000  # what the budgets above cut
     assert exc.step >= 1 and len(exc.partial) == exc.step
     stance = (0.0, 0.0)
@@ -57,7 +58,7 @@ def test_relaxed_and_least_violating_plans_follow_open_loop_pfl(planners):
     (v = 0) in the nonlinear model follows them (touchdown time, phase and foothold)."""
     base = planners["paper"]
     gait = base.periodic_gait()
-    relaxed = base.relaxed(torque_fraction=1.0, max_evaluations=10**6)
+    relaxed = base.relaxed(torque_fraction=1.0)
     assert relaxed.periodic_gait() is gait
     terrain = Terrain.stairs([0.33], [0.01])
     plan = relaxed.plan(terrain, (gait.q, gait.qd), (0.0, 0.0), horizon=3)
@@ -74,10 +75,12 @@ def test_relaxed_and_least_violating_plans_follow_open_loop_pfl(planners):
 
 
 def test_a_process_time_bound_stops_the_search(planners):
-    """The optional time bound (off by default): a bound already spent when the search starts
-    stops it before its first evaluation."""
+    """The optional time bound (off by default; it bounds replanning calls like the evaluation
+    budget): a bound already spent when the search starts stops it before its first
+    evaluation."""
     gait = planners["paper"].periodic_gait()
     pl = GaitPlanner("paper", {"time_budget": 1e-12})
+    previous = planners["paper"].plan(Terrain.flat(), (gait.q, gait.qd), (0.0, 0.0), horizon=2)
     with pytest.raises(PlanningError) as info:
-        pl.plan(Terrain.flat(), (gait.q, gait.qd), (0.0, 0.0), horizon=2)
+        pl.plan(Terrain.flat(), (gait.q, gait.qd), (0.0, 0.0), horizon=2, previous_plan=previous)
     assert info.value.budget_exhausted and info.value.evaluations == 0
