@@ -30,8 +30,10 @@ Within the full problem and each relaxation, a search that fails beyond the seco
 the feasible steps before the failure (``"shorter horizon"``, or the relaxation's name followed
 by ``", shorter horizon"``). When none gives two steps, a single step (the first feasible
 step found, else what is left of the previous plan) is held with PD on ``y`` (``fallback = "PD
-on the last planned step"``); zero input (``fallback = "zero input"``) remains only when there
-is nothing at all to track (e.g. a non-finite state, or ``theta_dot`` already not positive).
+on the last planned step"``; also when the Riccati solve over the look-ahead fails, and a step
+whose transverse model cannot be built ends the look-ahead); zero input (``fallback = "zero
+input"``) remains only when there is nothing at all to track (e.g. a non-finite state, or
+``theta_dot`` already not positive).
 The step's :class:`StepRecord` says which, and why (``reason``: every degradation tried, with
 its planning error).
 """
@@ -403,18 +405,23 @@ class TransverseController:
             steps = self.plan.steps[self._plan_offset :] if self.plan is not None else []
         sol = None
         if steps:
-            steps = steps[: cfg.horizon + 1]
-            try:
-                models = step_models(self.P, steps, self.terrain, cfg.margin)
-                if len(models) >= 2:
+            models = []
+            for step in steps[: cfg.horizon + 1]:
+                try:
+                    models.extend(step_models(self.P, [step], self.terrain, cfg.margin))
+                except ValueError as exc:  # a step with no motion to track: the look-ahead ends
+                    rec.reason = " | ".join(filter(None, (rec.reason, f"step model: {exc}")))
+                    break
+            if len(models) >= 2:
+                try:
                     sol = self._gains(models)
-                else:
-                    # one planned step left: no look-ahead to solve over, hold it with PD on y
-                    sol = pd_gains(models, cfg.grid, *FALLBACK_PD)
-                    rec.fallback = "PD on the last planned step"
-            except ValueError as exc:
-                rec.reason = rec.reason or str(exc)
-                sol = None
+                except ValueError as exc:
+                    rec.reason = " | ".join(filter(None, (rec.reason, f"gains: {exc}")))
+                    models = models[:1]
+            if sol is None and models:
+                # one step to track: no look-ahead to solve over, hold it with PD on y
+                sol = pd_gains(models[:1], cfg.grid, *FALLBACK_PD)
+                rec.fallback = "PD on the last planned step"
         if sol is None:
             rec.fallback = "zero input"
             self.solution = None
