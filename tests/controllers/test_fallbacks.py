@@ -80,3 +80,5 @@ def test_degradation_order_is_configurable_and_validated():
     for bad in ("least violation", ["zero input"], [{"no_such_field": 1.0}], [{}], [3]):
         with pytest.raises(ValueError, match="fallbacks"):
             ControllerConfig(fallbacks=bad)
+    with pytest.raises(ValueError, match="torque_fraction"):  # checked by the robot's planner
+        TransverseController("paper", "flat", {"fallbacks": [{"torque_fraction": 1.5}]})
