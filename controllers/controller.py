@@ -337,7 +337,8 @@ class TransverseController:
         self._plan_offset = 0
         self._relaxed: dict[tuple, GaitPlanner] = {}  # relaxed planners, by relaxation
         for level in self.config.fallbacks:  # a relaxation out of range fails here
-            self._planner_for(level)
+            if level != "previous plan":
+                self._planner_for(level)
         self._stance = (0.0, 0.0)
         self._last_q2 = math.nan
         self._x = np.zeros(4)
