@@ -288,12 +288,12 @@ class StepSearch:
         next step will gain or lose (slow down before a drop, speed up before a rise)."""
         gait, cfg = self.gait, self.config
         m22 = model.mass_matrix(self.P, q1m)[2]
-        rise = 2.0 * model.weight(self.P) / m22  # theta_dot^2 a metre of rise costs
         if cfg.energy_horizon > 0:
+            rise = 2.0 * model.weight(self.P) / m22  # theta_dot^2 a metre of rise costs
             f = _energy_target(gait, self.tmap, foothold, cfg.step_length, cfg.energy_horizon, rise)
         else:
             dh = float(self.tmap.height(foothold[0] + cfg.step_length)) - foothold[1]
-            f = gait.step.thetadot_minus**2 + rise * dh
+            f = gait.step.thetadot_minus**2 + 2.0 * model.weight(self.P) * dh / m22
         return math.sqrt(max(f, (1.5 * cfg.min_thetadot) ** 2))
 
     def _theta_target(self, theta_plus: float) -> float:
