@@ -60,6 +60,7 @@ from envs.physics.params import RobotParams, as_params
 from envs.physics.simulator import SimConfig, Simulator
 from envs.physics.terrain import Terrain, as_terrain
 
+from .fallbacks import DEFAULT_FALLBACKS, fallback_items, fallback_name
 from .feedback import constraint_at, feedback_law, thetadot_sq_at
 from .gains import GainTable, HorizonSolution, horizon_gains, pd_gains, step_models
 from .planner import GaitPlanner, Plan, PlannerConfig, PlanningError, StepPlan
@@ -74,67 +75,6 @@ __all__ = [
 
 #: PD gains (kp [1/s^2], kd [1/s]) used on a last remaining planned step
 FALLBACK_PD = (400.0, 40.0)
-
-#: the named degradations of ``ControllerConfig.fallbacks`` (the others are relaxations)
-NAMED_FALLBACKS = ("previous plan", "least violation")
-
-#: default degradation order: the planning torque reserve (0.8 of ``u_max``) relaxed to 0.95,
-#: then to the limit, then the duration bounds too; the rest of the previous plan; the
-#: least-violating steps
-DEFAULT_FALLBACKS: tuple = (
-    (("torque_fraction", 0.95),),
-    (("torque_fraction", 1.0),),
-    (("duration_max", 3.0), ("duration_min", 0.05), ("torque_fraction", 1.0)),
-    "previous plan",
-    "least violation",
-)
-
-
-def _fallback_items(raw: Any) -> tuple:
-    """``ControllerConfig.fallbacks`` in its stored form: names, and relaxations as sorted
-    ``(field, value)`` pairs."""
-    allowed = (
-        "a list whose items are 'previous plan', 'least violation' or a mapping of "
-        "PlannerConfig fields to relaxed values"
-    )
-    if isinstance(raw, (str, bytes)) or not hasattr(raw, "__iter__"):
-        raise ValueError(f"ControllerConfig.fallbacks = {raw!r}; allowed: {allowed}")
-    out: list = []
-    planner_fields = set(PlannerConfig.__dataclass_fields__)
-    for item in raw:
-        if isinstance(item, str):
-            if item not in NAMED_FALLBACKS:
-                raise ValueError(f"ControllerConfig.fallbacks: unknown item {item!r}; {allowed}")
-            out.append(item)
-            continue
-        try:
-            pairs = dict(item.items() if hasattr(item, "items") else item)
-        except (TypeError, ValueError):
-            raise ValueError(
-                f"ControllerConfig.fallbacks: bad item {item!r}; allowed: {allowed}"
-            ) from None
-        bad = sorted(set(pairs) - planner_fields)
-        if bad or not pairs:
-            raise ValueError(
-                f"ControllerConfig.fallbacks: relaxation {item!r} names no or unknown "
-                f"PlannerConfig fields {bad}"
-            )
-        out.append(
-            tuple(
-                sorted(
-                    (str(k), real_setting(f"ControllerConfig.fallbacks: {k}", v))
-                    for k, v in pairs.items()
-                )
-            )
-        )
-    return tuple(out)
-
-
-def _fallback_name(item: Any) -> str:
-    """How a degradation is reported (``StepRecord.fallback``)."""
-    if isinstance(item, str):
-        return item
-    return "relaxed: " + ", ".join(f"{k}={v:g}" for k, v in item)
 
 
 # ---------------------------------------------------------------------------- configuration
@@ -187,7 +127,7 @@ class ControllerConfig:
     replan_evaluations: int = 4000
 
     def __post_init__(self) -> None:
-        object.__setattr__(self, "fallbacks", _fallback_items(self.fallbacks))
+        object.__setattr__(self, "fallbacks", fallback_items(self.fallbacks))
         for name in ("horizon", "grid", "plan_steps", "replan_evaluations"):
             lo = {"horizon": 1, "grid": 4, "plan_steps": 2, "replan_evaluations": 1}[name]
             v = integer_setting(f"ControllerConfig.{name}", getattr(self, name), lo)
@@ -453,7 +393,7 @@ class TransverseController:
         left = self.config.replan_evaluations
         cap = self.planner.config.max_evaluations
         for level in (None, *self.config.fallbacks):
-            name = "full problem" if level is None else _fallback_name(level)
+            name = "full problem" if level is None else fallback_name(level)
             rec.degradations.append(name)
             if level == "previous plan":
                 old, off = self._previous_steps(first, new_step)

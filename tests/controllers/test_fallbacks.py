@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 
 from controllers import ControllerConfig, GaitPlanner, TransverseController
-from controllers.controller import DEFAULT_FALLBACKS
+from controllers.fallbacks import DEFAULT_FALLBACKS
 from envs.physics.terrain import Terrain
 
 # a 7.5 mm rise the paper robot climbs with its hip input within 0.8 u_max but not within 0.3
