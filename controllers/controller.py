@@ -29,14 +29,29 @@ The two modes (:attr:`ControllerConfig.mode`):
 Each :class:`StepRecord` keeps ``V`` at the step's first and last tick, their ratio, the largest
 ``|x_perp|`` and the largest ``|u|``: the certificate made visible (evidence, not a proof).
 
-If planning fails (:class:`PlanningError`) beyond the second step, the look-ahead is shortened
-to the feasible steps (``fallback = "shorter horizon"``). If it fails earlier, the controller
-keeps the rest of the previous plan (shifted by one footstep, ``fallback = "previous plan"``)
-while that still looks at least one step ahead, and otherwise plans the first step alone when
-that is feasible. With a single planned step there is nothing to solve the Riccati equation
-over: that step's constraint is held with PD on ``y`` (``fallback = "PD on the last planned
-step"``). With no plan at all it applies zero input (``fallback = "zero input"``). The step's
-:class:`StepRecord` says which, and why (``reason``).
+If the full planning problem has no solution (:class:`PlanningError`), the controller degrades
+in the order of ``ControllerConfig.fallbacks``, stopping at the first that gives at least two
+steps (the current one and a look-ahead for the Riccati equation):
+
+* a mapping of :class:`PlannerConfig` changes (a *relaxation*, e.g. ``{"torque_fraction":
+  0.95}``): plan again with those settings, steps still pulled to the nominal periodic gait
+  (``fallback = "relaxed: torque_fraction=0.95"``);
+* ``"previous plan"``: the rest of the previous plan, shifted by one footstep, while it still
+  looks at least one step ahead;
+* ``"least violation"``: the two least-violating steps
+  (:meth:`GaitPlanner.plan_least_violation`, from the last relaxation's settings), tracked with
+  the transverse feedback like any plan.
+
+Within the full problem and each relaxation, a search that fails beyond the second step keeps
+the feasible steps before the failure (``"shorter horizon"``, or the relaxation's name followed
+by ``", shorter horizon"``). When none gives two steps, a single step (the first feasible
+step found, else what is left of the previous plan) is held with PD on ``y`` (``fallback = "PD
+on the last planned step"``; also when the Riccati solve over the look-ahead fails, and a step
+whose transverse model cannot be built ends the look-ahead); zero input (``fallback = "zero
+input"``) remains only when there is nothing at all to track (e.g. a non-finite state, or
+``theta_dot`` already not positive).
+The step's :class:`StepRecord` says which, and why (``reason``: every degradation tried, with
+its planning error).
 """
 
 from __future__ import annotations
@@ -61,6 +76,7 @@ from envs.physics.params import RobotParams, as_params
 from envs.physics.simulator import SimConfig, Simulator
 from envs.physics.terrain import Terrain, as_terrain
 
+from .fallbacks import DEFAULT_FALLBACKS, fallback_items, fallback_name
 from .feedback import constraint_at, feedback_law, thetadot_sq_at
 from .gains import GainTable, HorizonSolution, horizon_gains, pd_gains, step_models
 from .planner import GaitPlanner, Plan, PlannerConfig, PlanningError, StepPlan
@@ -109,6 +125,20 @@ class ControllerConfig:
             is continued with its slope ``phi'`` blended to 0 over this many radians (the legs
             stop opening, the hip falls forward, the swing foot goes down); 0 extrapolates the
             Bezier polynomial instead. [rad], >= 0.
+        fallbacks: the degradations tried in order when the full planning problem has no
+            solution (see the module docstring): ``"previous plan"``, ``"least violation"``,
+            or a mapping of :class:`PlannerConfig` fields to relaxed values (a relaxation,
+            stored as sorted ``(field, value)`` pairs). Default :data:`DEFAULT_FALLBACKS`:
+            ``torque_fraction`` 0.95, then 1.0; then also ``duration_min`` 0.05 s and
+            ``duration_max`` 3 s; then the previous plan; then the least-violating steps. An
+            empty list gives the plain chain (shorter horizon, PD on a single step).
+        replan_evaluations: step evaluations (see :attr:`PlannerConfig.max_evaluations`) the
+            planner calls of one replanning may spend together, the full problem and the
+            relaxations; each call gets what is left (at most the planner's own
+            ``max_evaluations``), the least-violating steps get the planner's own budget. A
+            deterministic bound on the replanning time (about 55 us per evaluation on one
+            core), >= 1. The plan at :meth:`TransverseController.reset` (nothing to fall back
+            on) runs its whole search.
     """
 
     horizon: int = 3
@@ -120,10 +150,13 @@ class ControllerConfig:
     plan_steps: int = 12
     margin: float = 0.15
     late_blend: float = 0.05
+    fallbacks: tuple = DEFAULT_FALLBACKS
+    replan_evaluations: int = 4000
 
     def __post_init__(self) -> None:
-        for name in ("horizon", "grid", "plan_steps"):
-            lo = {"horizon": 1, "grid": 4, "plan_steps": 2}[name]
+        object.__setattr__(self, "fallbacks", fallback_items(self.fallbacks))
+        for name in ("horizon", "grid", "plan_steps", "replan_evaluations"):
+            lo = {"horizon": 1, "grid": 4, "plan_steps": 2, "replan_evaluations": 1}[name]
             v = integer_setting(f"ControllerConfig.{name}", getattr(self, name), lo)
             object.__setattr__(self, name, v)
         for name in ("Q", "Qj"):
@@ -224,8 +257,15 @@ class StepRecord:
         max_abs_u: largest ``|u|`` over the step [input units]; saturated: ticks at the
             actuator limit.
         fallback: None, ``"shorter horizon"`` (planning failed beyond the second step; the
-            look-ahead is cut there), ``"previous plan"``, ``"PD on the last planned step"`` or
-            ``"zero input"`` (see the module docstring); reason: the planning error.
+            look-ahead is cut there), a relaxation (``"relaxed: ..."``, possibly followed by
+            ``", shorter horizon"``), ``"previous plan"``, ``"least violation"``, ``"PD on the
+            last planned step"`` or ``"zero input"`` (see the module docstring); reason: the
+            planning errors of the degradations tried (``" | "`` between them).
+        plan_evaluations: step evaluations the planner calls of the step spent (all
+            degradations together; see :attr:`PlannerConfig.max_evaluations`).
+        budget_exhausted: a planner call of the step was cut by its search budget.
+        degradations: the degradations tried, in order (:attr:`ControllerConfig.fallbacks`
+            names; ``"full problem"`` first).
         max_xperp_norm: largest Euclidean norm of ``x_perp = [I, y, y_dot]`` over the step
             (0 without gains).
     """
@@ -250,6 +290,9 @@ class StepRecord:
     fallback: str | None = None
     reason: str | None = None
     max_xperp_norm: float = 0.0
+    plan_evaluations: int = 0
+    budget_exhausted: bool = False
+    degradations: list[str] = field(default_factory=list)
 
     def certificate(self) -> dict[str, float | None]:
         """The step's certificate values as plain data: ``V_start``, ``V_end``, ``V_ratio``,
@@ -325,6 +368,10 @@ class TransverseController:
         self._law_args: tuple[np.ndarray, ...] = ()  # gain_table.kernel_args()
         self._torque_gain = float(model.input_gain(self.P))  # hip torque per input unit [N m]
         self._plan_offset = 0
+        self._relaxed: dict[tuple, GaitPlanner] = {}  # relaxed planners, by relaxation
+        for level in self.config.fallbacks:  # a relaxation out of range fails here
+            if level != "previous plan":
+                self._planner_for(level)
         self._stance = (0.0, 0.0)
         self._last_q2 = math.nan
         self._x = np.zeros(4)
@@ -393,51 +440,37 @@ class TransverseController:
         else:
             rec = self.records[-1]
             rec.fallback = rec.reason = None
+            rec.plan_evaluations, rec.budget_exhausted, rec.degradations = 0, False, []
         self._last_q2 = float(q[1])
         steps: list[StepPlan] | None = None
         if first or cfg.replan:
             n = cfg.horizon + 1 if cfg.replan else max(cfg.plan_steps, cfg.horizon + 1)
             t0 = time.perf_counter()
             previous = self.plan if cfg.replan else None
-            failed_at = None
-            while steps is None:
-                try:
-                    plan = self.planner.plan(
-                        self.terrain, (q, qd), self._stance, horizon=n, previous_plan=previous
-                    )
-                    self.plan, self._plan_offset = plan, 0
-                    steps = plan.steps
-                except PlanningError as exc:
-                    rec.reason = str(exc)
-                    failed_at = exc.step
-                    if exc.step < 2 or n <= 2:
-                        break
-                    # the first exc.step steps are feasible: plan a shorter look-ahead
-                    n = exc.step
-                    rec.fallback = "shorter horizon"
-                except ValueError as exc:
-                    rec.reason = str(exc)
-                    break
-            if steps is None:
-                steps = self._fallback_steps(q, qd, failed_at, first, new_step, previous, rec)
+            steps = self._plan_steps(q, qd, n, first, new_step, previous, rec)
             rec.plan_time = time.perf_counter() - t0
         else:
             self._plan_offset += 1
             steps = self.plan.steps[self._plan_offset :] if self.plan is not None else []
         sol = None
         if steps:
-            steps = steps[: cfg.horizon + 1]
-            try:
-                models = step_models(self.P, steps, self.terrain, cfg.margin)
-                if len(models) >= 2:
+            models = []
+            for step in steps[: cfg.horizon + 1]:
+                try:
+                    models.extend(step_models(self.P, [step], self.terrain, cfg.margin))
+                except ValueError as exc:  # a step with no motion to track: the look-ahead ends
+                    rec.reason = " | ".join(filter(None, (rec.reason, f"step model: {exc}")))
+                    break
+            if len(models) >= 2:
+                try:
                     sol = self._gains(models)
-                else:
-                    # one planned step left: no look-ahead to solve over, hold it with PD on y
-                    sol = pd_gains(models, cfg.grid, *FALLBACK_PD)
-                    rec.fallback = "PD on the last planned step"
-            except ValueError as exc:
-                rec.reason = rec.reason or str(exc)
-                sol = None
+                except ValueError as exc:
+                    rec.reason = " | ".join(filter(None, (rec.reason, f"gains: {exc}")))
+                    models = models[:1]
+            if sol is None and models:
+                # one step to track: no look-ahead to solve over, hold it with PD on y
+                sol = pd_gains(models[:1], cfg.grid, *FALLBACK_PD)
+                rec.fallback = "PD on the last planned step"
         if sol is None:
             rec.fallback = "zero input"
             self.solution = None
@@ -448,46 +481,117 @@ class TransverseController:
         rec.solve_time = sol.solve_time
         self._load(sol)
 
-    def _fallback_steps(
+    def _plan_steps(
         self,
         q: np.ndarray,
         qd: np.ndarray,
-        failed_at: int | None,
+        n: int,
         first: bool,
         new_step: bool,
         previous: Plan | None,
         rec: StepRecord,
     ) -> list[StepPlan] | None:
-        """Steps to use when planning failed: the rest of the previous plan if it still looks
-        ahead, else a fresh single step (when the first step was feasible), else whatever is
-        left of the previous plan."""
-        old: list[StepPlan] = []
-        off = self._plan_offset
-        if not first and self.plan is not None:
-            off = self._plan_offset + int(new_step)
-            old = self.plan.steps[off:]
-        if len(old) >= 2:
-            self._plan_offset = off
-            rec.fallback = "previous plan"
-            return old
-        if failed_at == 1:
+        """Plan ``n`` steps from ``(q, qd)``; when the full problem has no solution, degrade in
+        the order of ``ControllerConfig.fallbacks`` (module docstring). Records what it did in
+        ``rec``; returns the steps to track (None: nothing)."""
+        single: list[StepPlan] = []  # the first lone step found (held with PD if nothing else)
+        notes: list[str] = []
+        left = self.config.replan_evaluations
+        cap = self.planner.config.max_evaluations
+        for level in (None, *self.config.fallbacks):
+            name = "full problem" if level is None else fallback_name(level)
+            rec.degradations.append(name)
+            if level == "previous plan":
+                old, off = self._previous_steps(first, new_step)
+                if len(old) >= 2:
+                    self._plan_offset = off
+                    rec.fallback, rec.reason = name, " | ".join(notes)
+                    return old
+                notes.append(f"{name}: fewer than two steps left")
+                continue
+            if level != "least violation" and left <= 0:
+                notes.append(f"{name}: replanning budget spent")
+                rec.budget_exhausted = True
+                continue
+            planner = self._planner_for(level)
             try:
-                one = self.planner.plan(
-                    self.terrain, (q, qd), self._stance, horizon=1, previous_plan=previous
-                )
-            except (PlanningError, ValueError):
-                one = None
-            if one is not None:
-                # keep the older plan (if any) for later fallbacks
-                self._plan_offset = off
-                if self.plan is None:
-                    self.plan = one
-                return one.steps
+                if level == "least violation":
+                    plan = planner.plan_least_violation(
+                        self.terrain, (q, qd), self._stance, horizon=2, previous_plan=previous
+                    )
+                else:
+                    plan = planner.plan(
+                        self.terrain,
+                        (q, qd),
+                        self._stance,
+                        horizon=n,
+                        previous_plan=previous,
+                        max_evaluations=None if previous is None else min(left, cap),
+                    )
+                    left -= plan.evaluations
+            except PlanningError as exc:
+                left -= exc.evaluations
+                rec.plan_evaluations += exc.evaluations
+                rec.budget_exhausted |= exc.budget_exhausted
+                notes.append(f"{name}: {exc}")
+                if len(exc.partial) < 2:
+                    single = single or list(exc.partial)
+                    continue
+                # the steps before the failure are feasible: a shorter look-ahead
+                plan = Plan(exc.partial, self.robot, planner.config)
+                name = "shorter horizon" if level is None else f"{name}, shorter horizon"
+            except ValueError as exc:  # a state the planner cannot start from
+                notes.append(f"{name}: {exc}")
+                break
+            else:
+                rec.plan_evaluations += plan.evaluations
+                if len(plan.steps) < 2:
+                    single = single or list(plan.steps)
+                    notes.append(f"{name}: fewer than two steps")
+                    continue
+                if level == "least violation":
+                    worst = min(plan.violations)
+                    if worst[0] < 0:
+                        notes.append(f"{name}: worst violation {worst[0]:.3g} ({worst[1]})")
+            self.plan, self._plan_offset = plan, 0
+            rec.fallback = None if level is None and name == "full problem" else name
+            rec.reason = " | ".join(notes) or None
+            return plan.steps
+        rec.reason = " | ".join(notes) or None
+        if single:
+            # keep the older plan (if any) for later fallbacks
+            self._plan_offset = self._previous_steps(first, new_step)[1]
+            if self.plan is None:
+                self.plan = Plan(single, self.robot, self.planner.config)
+            return single
+        old, off = self._previous_steps(first, new_step)
         if old:
             self._plan_offset = off
             rec.fallback = "previous plan"
             return old
         return None
+
+    def _previous_steps(self, first: bool, new_step: bool) -> tuple[list[StepPlan], int]:
+        """What is left of the previous plan for the current step, and its offset."""
+        off = self._plan_offset
+        if first or self.plan is None:
+            return [], off
+        off = self._plan_offset + int(new_step)
+        return self.plan.steps[off:], off
+
+    def _planner_for(self, level: Any) -> GaitPlanner:
+        """The planner of a degradation: the full problem's, a relaxation's (made on first
+        use), and for the least-violating steps the last relaxation's."""
+        if level == "least violation":
+            relaxations = [f for f in self.config.fallbacks if not isinstance(f, str)]
+            level = relaxations[-1] if relaxations else None
+        if level is None:
+            return self.planner
+        key = (id(self.planner), level)
+        out = self._relaxed.get(key)
+        if out is None:
+            out = self._relaxed[key] = self.planner.relaxed(**dict(level))
+        return out
 
     def _gains(self, models: list[StepModel]) -> HorizonSolution:
         return horizon_gains(models, self.config)

@@ -13,12 +13,14 @@ and the controller's input is applied to the estimate. At every located touchdow
 controller replans from the mapped estimate. Shortly after the start, once the observer has
 converged (``settle_time``), the current step is replanned from the estimate.
 
-Safe behaviour: if planning fails, the controller shortens its look-ahead (down to a single
-planned step held with PD on ``y``), keeps the previous plan, or, with nothing left, applies
-zero input (:mod:`controllers.controller`); if anything else fails inside a tick (a non-finite
-estimate, say), the policy applies zero input for the rest of the episode. Both are recorded in
-:attr:`ReferencePolicy.diagnostics` (``"fallbacks"``: ``(kind, time, reason)``). A call never
-raises because of the robot's state.
+Safe behaviour: if planning fails, the controller degrades in the order of
+``ControllerConfig.fallbacks`` (relaxed planning settings, the previous plan, the
+least-violating steps, then a single step held with PD on ``y``; see
+:mod:`controllers.controller`) and keeps tracking a motion while the robot is upright; zero
+input is left only for when there is nothing to track. If anything else fails inside a tick (a
+non-finite estimate, say), the policy applies zero input for the rest of the episode. Both are
+recorded in :attr:`ReferencePolicy.diagnostics` (``"fallbacks"``: ``(kind, time, reason)``). A
+call never raises because of the robot's state.
 """
 
 from __future__ import annotations

@@ -20,6 +20,7 @@ The package follows the method section by section:
   constraint groups, the SLSQP adaptor), evaluated by the compiled :mod:`.kernel`;
 * :mod:`.periodic`: the periodic flat-ground gait, the reference of the step costs;
 * :mod:`.search`: one planning call's depth-first search over footholds and step shapes;
+* :mod:`.least_violation`: the least-violating steps, when no feasible step exists;
 * :mod:`.gait_planner`: :class:`GaitPlanner`, the entry point.
 
 Conventions: control notes, sections 1 and 2. Units: rad, rad/s, m, s; hip input ``u`` in the

@@ -25,12 +25,21 @@ __all__ = ["PlannerConfig", "PlanningError"]
 
 class PlanningError(RuntimeError):
     """No feasible plan: ``step`` (index within the horizon), the violated ``constraint`` and
-    an optional ``detail`` (free text added to the message)."""
+    an optional ``detail`` (free text added to the message).
+
+    A failed search also says what it found (set by :meth:`GaitPlanner.plan`): ``partial``, the
+    feasible steps ``0 .. step - 1`` before the failure (a list of :class:`StepPlan`, the best
+    plan found), ``evaluations`` (step evaluations spent) and ``budget_exhausted`` (the search
+    was cut by its budget, ``PlannerConfig.max_evaluations`` / ``time_budget``).
+    """
 
     def __init__(self, step: int, constraint: str, detail: str = ""):
         self.step = int(step)
         self.constraint = str(constraint)
         self.detail = str(detail)
+        self.partial: list = []
+        self.evaluations = 0
+        self.budget_exhausted = False
         msg = f"planning failed at step {self.step}: {self.constraint}"
         super().__init__(msg + (f" ({detail})" if detail else ""))
 
@@ -73,9 +82,22 @@ class PlannerConfig:
             from the periodic gait, mean squared input relative to ``u_max`` (periodic gait
             only), post-impact slope deviation).
         max_iter: SLSQP iterations per step.
+        max_evaluations: step evaluations (rows of the compiled step kernel: SLSQP points and
+            their forward-difference neighbours, global-search samples) one replanning call (one
+            with a previous plan to fall back on) may spend; the search then stops and reports
+            the best it found (a deterministic, machine-independent budget). A plan from
+            scratch runs its whole search.
+        time_budget: process time one replanning call may spend [s] (``time.process_time``);
+            0 for no time bound (the default). A time bound cuts searches at a point that
+            depends on the machine and its load: same seed, same result no longer holds.
         lookahead: 1 to optimise each step jointly with the next one (only the first is kept;
             anticipates drops and rises; slower), 2 to do so only where this step and the next
             change height by more than ``lookahead_rise`` [m] together, 0 never.
+        energy_horizon: 0 (default): each step's end speed is the gait's, corrected by the
+            height the next step gains or loses; n >= 1: the speed that reaches the gait's end
+            speed ``n`` steps later over footholds ``step_length`` apart, backwards through the
+            gait step's closed-form reduced dynamics and impact loss (a rise further ahead
+            speeds up the current step).
         candidates: footholds tried per step before giving up.
         candidate_spacing: least spacing between the footholds tried [m].
 
@@ -122,8 +144,11 @@ class PlannerConfig:
     w_torque: float = 0.2
     w_slope: float = 0.05
     max_iter: int = 60
+    max_evaluations: int = 2000
+    time_budget: float = 0.0
     lookahead: int = 2
     lookahead_rise: float = 0.002
+    energy_horizon: int = 0
     candidates: int = 4
     candidate_spacing: float = 0.01
 
@@ -146,8 +171,10 @@ class PlannerConfig:
             "check_points": 8,
             "horizon": 1,
             "max_iter": 1,
+            "max_evaluations": 1,
             "candidates": 1,
             "lookahead": 0,
+            "energy_horizon": 0,
         }
         for name, lo in ints.items():
             v = getattr(self, name)
@@ -164,7 +191,7 @@ class PlannerConfig:
         nonneg = (
             "edge_margin drop_margin rise_margin max_rise max_drop clearance "
             "lookahead_rise arm_clearance retracted_clearance face_clearance touchdown_slope "
-            "gait_min_thetadot w_speed w_end w_shape w_torque w_slope"
+            "gait_min_thetadot w_speed w_end w_shape w_torque w_slope time_budget"
         ).split()
         for name in nonneg:
             if not getattr(self, name) >= 0:

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import math
 import time
 from dataclasses import asdict
@@ -14,12 +15,14 @@ from envs.physics.params import RobotParams, as_params
 
 from .config import PlannerConfig, PlanningError
 from .footholds import FootholdChains, TerrainMap
+from .least_violation import least_violation_steps
 from .periodic import GaitCache, solve_periodic_gait
 from .plan import PeriodicGait, Plan
 from .search import StepSearch, StepSolutions
 
 __all__ = ["GaitPlanner"]
 
+_UNBOUNDED = 2**62  # evaluations of a search without a budget
 _SOLUTIONS_LIMIT = 4096  # solved step problems kept while replanning before they are forgotten
 
 
@@ -61,6 +64,22 @@ class GaitPlanner:
         # step problems solved during the current walk, and foothold chains (per terrain)
         self._solutions = StepSolutions()
         self._chains = FootholdChains(config.rules(), self.params.l, config.candidate_spacing)
+        self._gait_source: GaitPlanner = self  # the planner whose periodic gait steps pull to
+
+    def relaxed(self, **changes: Any) -> GaitPlanner:
+        """A planner with the settings ``changes`` (fields of :class:`PlannerConfig`, e.g. a
+        larger ``torque_fraction``) whose steps still pull towards this planner's periodic gait
+        (the relaxation changes what is feasible, not the gait aimed at).
+
+        Raises:
+            ValueError: an unknown setting or a value out of its range.
+        """
+        bad = sorted(set(changes) - {f.name for f in dataclasses.fields(PlannerConfig)})
+        if bad:
+            raise ValueError(f"relaxed planner: unknown PlannerConfig field(s) {bad}")
+        out = GaitPlanner(self.params, dataclasses.replace(self.config, **changes))
+        out._gait_source = self._gait_source
+        return out
 
     def periodic_gait(
         self, step_length: float | None = None, speed: float | None = None
@@ -72,6 +91,8 @@ class GaitPlanner:
             PlanningError: no feasible periodic gait.
             ValueError: step length or speed out of range.
         """
+        if self._gait_source is not self:
+            return self._gait_source.periodic_gait(step_length, speed)
         cfg = self.config
         L = cfg.step_length if step_length is None else float(step_length)
         vt = cfg.target_speed if speed is None else float(speed)
@@ -93,6 +114,7 @@ class GaitPlanner:
         stance_foot: tuple[float, float],
         horizon: int | None = None,
         previous_plan: Plan | None = None,
+        max_evaluations: int | None = None,
     ) -> Plan:
         """Plan ``horizon`` steps from the post-impact ``state``.
 
@@ -107,14 +129,71 @@ class GaitPlanner:
                 terrain, start state, footholds and weights, to 1e-10) are reused after one
                 feasibility check instead of being optimised again; with ``None`` the planner
                 forgets them, so a call without a previous plan depends on its arguments only.
+            max_evaluations: step evaluations this call may spend, an integer >= 1 (default:
+                ``config.max_evaluations`` when replanning, i.e. with a ``previous_plan``; a
+                plan from scratch runs its whole search).
 
         Raises:
-            PlanningError: no feasible step (names the step and the violated constraint).
+            PlanningError: no feasible step (names the step and the violated constraint; its
+                ``partial`` holds the feasible steps found before it).
             ValueError: a malformed or non-finite state or stance foot, a horizon that is not
                 an integer >= 1.
         """
         t0 = time.perf_counter()
+        search, start, stance = self._search(
+            terrain, state, stance_foot, horizon, previous_plan, max_evaluations
+        )
+        plan = Plan(search.run(start, stance), self.params, self.config)
+        plan.evaluations = search.evaluations.used
+        plan.solve_time = time.perf_counter() - t0
+        return plan
+
+    def plan_least_violation(
+        self,
+        terrain: Any,
+        state: tuple[np.ndarray, np.ndarray],
+        stance_foot: tuple[float, float],
+        horizon: int = 2,
+        previous_plan: Plan | None = None,
+        max_evaluations: int | None = None,
+    ) -> Plan:
+        """The least-violating steps from the post-impact ``state`` (the last resort when no
+        feasible plan exists; see :mod:`controllers.planner.least_violation`): up to
+        ``horizon`` steps, each with its worst violation in ``Plan.violations``; the plan may
+        have fewer steps than asked, or none.
+
+        Args:
+            terrain: the terrain, as for :meth:`plan`.
+            state: actual post-impact ``(q, qd)`` [rad, rad/s].
+            stance_foot: stance-foot position ``(x, y)`` [m].
+            horizon: number of steps, an integer >= 1.
+            previous_plan: as for :meth:`plan` (``None`` forgets the solved step problems).
+            max_evaluations: step evaluations this call may spend, an integer >= 1 (default:
+                no bound; the search is bounded by construction, ``horizon x candidates`` step
+                problems of a coarse global search and 40 least-squares evaluations each).
+
+        Raises:
+            PlanningError: ``theta_dot`` not positive after the impact (nothing to track).
+            ValueError: as for :meth:`plan`.
+        """
+        t0 = time.perf_counter()
+        bound = _UNBOUNDED if max_evaluations is None else max_evaluations
+        search, start, stance = self._search(
+            terrain, state, stance_foot, horizon, previous_plan, bound
+        )
+        steps, worst = least_violation_steps(search, start, stance)
+        plan = Plan(steps, self.params, self.config)
+        plan.violations = worst
+        plan.evaluations = search.evaluations.used
+        plan.solve_time = time.perf_counter() - t0
+        return plan
+
+    def _search(self, terrain, state, stance_foot, horizon, previous_plan, max_evaluations):
+        """The checked arguments of a planning call as ``(StepSearch, start, stance)``."""
         cfg = self.config
+        budget = None
+        if max_evaluations is not None:
+            budget = integer_setting("max_evaluations", max_evaluations, 1)
         H = cfg.horizon if horizon is None else integer_setting("horizon", horizon, 1)
         try:
             q = np.asarray(state[0], dtype=float).reshape(-1)
@@ -132,9 +211,7 @@ class GaitPlanner:
             self._solutions.clear()
         gait = self.periodic_gait()
         search = StepSearch(
-            self.params, cfg, tmap, gait, self._solutions, self._chains, H, previous_plan
+            self.params, cfg, tmap, gait, self._solutions, self._chains, H, previous_plan, budget
         )
         start = (float(q[1]), float(q[0]), float(qd[0] / qd[1]), float(qd[1]))
-        plan = Plan(search.run(start, stance), self.params, cfg)
-        plan.solve_time = time.perf_counter() - t0
-        return plan
+        return search, start, stance

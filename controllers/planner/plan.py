@@ -194,6 +194,11 @@ class Plan:
         params: the robot's :class:`RobotParams`; P: its parameter vector.
         config: the :class:`PlannerConfig` used.
         solve_time: wall time of the planning call [s].
+        evaluations: step evaluations the planning call spent (see
+            :attr:`PlannerConfig.max_evaluations`).
+        violations: per step, ``(worst, constraint)``: the most negative constraint value and
+            the violated constraint's name (``(0.0, "")`` for a feasible step); a plan of the
+            least-violating steps (:meth:`GaitPlanner.plan_least_violation`) may have some.
     """
 
     def __init__(self, steps: list[StepPlan], params: RobotParams, config: PlannerConfig):
@@ -202,6 +207,8 @@ class Plan:
         self.P = params.vector()
         self.config = config
         self.solve_time = math.nan
+        self.evaluations = 0
+        self.violations: list[tuple[float, str]] = [(0.0, "")] * len(self.steps)
 
     def __len__(self) -> int:
         return len(self.steps)

@@ -23,6 +23,7 @@ evaluated in one batched call.
 from __future__ import annotations
 
 import math
+import time
 from collections import namedtuple
 from collections.abc import Callable
 from dataclasses import dataclass
@@ -45,12 +46,14 @@ from .plan import PeriodicGait
 __all__ = [
     "CONSTRAINT_GROUPS",
     "BatchProblem",
+    "BudgetExhausted",
     "ConstraintGroup",
     "ConstraintGroups",
     "ConstraintLayout",
     "FixedStep",
     "GaitReference",
     "GroupColumns",
+    "SearchBudget",
     "StepEvaluator",
     "batch_row",
     "constraint_layout",
@@ -439,6 +442,49 @@ def batch_row(ev: dict[str, Any], r: int) -> dict[str, Any]:
     return out
 
 
+# ---------------------------------------------------------------------------- search budget
+class BudgetExhausted(RuntimeError):
+    """A planning call has spent its :class:`SearchBudget`."""
+
+
+class SearchBudget:
+    """What one planning call may spend: step evaluations (rows of the compiled kernel), and
+    optionally process time.
+
+    Args:
+        evaluations: step evaluations allowed (a batch that starts within the budget is
+            evaluated whole), >= 1.
+        seconds: process time allowed [s] (``time.process_time``; 0: no time bound). A time
+            bound makes the result depend on the machine and its load.
+
+    Attributes:
+        used: step evaluations spent so far.
+        exhausted: the budget ran out (the search stopped early).
+    """
+
+    def __init__(self, evaluations: int, seconds: float = 0.0):
+        self.evaluations = int(evaluations)
+        self.seconds = float(seconds)
+        self.used = 0
+        self.exhausted = False
+        self._deadline = time.process_time() + seconds if seconds > 0 else math.inf
+
+    def spend(self, n: int) -> None:
+        """Account for ``n`` evaluations about to be made.
+
+        Raises:
+            BudgetExhausted: the budget was already spent (nothing is accounted).
+        """
+        if (
+            self.exhausted
+            or self.used >= self.evaluations
+            or (self._deadline < math.inf and time.process_time() > self._deadline)
+        ):
+            self.exhausted = True
+            raise BudgetExhausted(f"search budget exhausted after {self.used} step evaluations")
+        self.used += int(n)
+
+
 # ---------------------------------------------------------------------------- SLSQP adaptor
 class BatchProblem:
     """Cost and constraints of a batched evaluator for SLSQP, cached by point.
@@ -447,10 +493,17 @@ class BatchProblem:
     costs ``(B,)``, packed constraints ``(B, m)`` and any batch payload (kept with the row
     index). The Jacobians are forward differences whose ``k`` perturbed points are evaluated in
     one batched call (the same derivatives SLSQP would take by itself, at a fraction of the cost).
+    With a :class:`SearchBudget` every evaluation is accounted; once it is spent, any further
+    evaluation raises :class:`BudgetExhausted`.
     """
 
-    def __init__(self, fn: Callable[[np.ndarray], tuple[np.ndarray, np.ndarray, Any]]):
+    def __init__(
+        self,
+        fn: Callable[[np.ndarray], tuple[np.ndarray, np.ndarray, Any]],
+        budget: SearchBudget | None = None,
+    ):
         self.fn = fn
+        self.budget = budget
         self.cache: dict[bytes, tuple[float, np.ndarray, Any, int]] = {}
         self._jac: dict[bytes, tuple[np.ndarray, np.ndarray]] = {}
 
@@ -459,6 +512,8 @@ class BatchProblem:
         todo = [i for i, k in enumerate(keys) if k not in self.cache]
         if not todo:
             return
+        if self.budget is not None:
+            self.budget.spend(len(todo))
         cost, g, ev = self.fn(X[todo])
         for r, i in enumerate(todo):
             self.cache[keys[i]] = (float(cost[r]), g[r], ev, r)

@@ -31,7 +31,9 @@ from .footholds import FootholdChains, TerrainMap, touchdown_configuration
 from .plan import PeriodicGait, Plan, StepPlan
 from .problem import (
     BatchProblem,
+    BudgetExhausted,
     FixedStep,
+    SearchBudget,
     StepEvaluator,
     batch_row,
     gait_reference,
@@ -41,6 +43,7 @@ from .problem import (
 __all__ = ["StepSearch", "StepSolutions"]
 
 _FTOL = 1e-7  # SLSQP tolerance on the cost of a step problem
+_UNBOUNDED = 2**62  # evaluations of a search without a budget
 
 
 class StepSolutions:
@@ -80,6 +83,8 @@ class StepSearch:
         chains: the planner's foothold-chain search.
         horizon: steps to plan.
         previous_plan: the plan made at the previous footstep (warm starts), or None.
+        max_evaluations: step evaluations the search may spend (default: when replanning,
+            ``config.max_evaluations``, the whole search otherwise).
     """
 
     def __init__(
@@ -92,6 +97,7 @@ class StepSearch:
         chains: FootholdChains,
         horizon: int,
         previous_plan: Plan | None,
+        max_evaluations: int | None = None,
     ):
         self.params, self.config, self.tmap = params, config, tmap
         self.P = params.vector()
@@ -102,12 +108,21 @@ class StepSearch:
         self.prev = list(previous_plan.steps) if previous_plan is not None else []
         self.horizon = horizon
         self.budget = 3 * horizon + 2 * config.candidates  # step solves left
+        self.may_stall = previous_plan is not None
+        # the budget bounds replanning (a previous plan is there to fall back on); a plan from
+        # scratch runs its whole search unless the call sets a budget
+        if max_evaluations is None:
+            max_evaluations = config.max_evaluations if self.may_stall else _UNBOUNDED
+        self.evaluations = SearchBudget(
+            max_evaluations, config.time_budget if self.may_stall else 0.0
+        )
+        self.path: list[StepPlan] = []  # the steps of the branch being searched
+        self.partial: list[StepPlan] = []  # the feasible steps before the deepest failure
         self.fresh = False  # the current option ran an optimisation
         self.deepest: PlanningError | None = None  # the failure furthest along the horizon
         # a step optimisation of this call has failed: from then on, when replanning (the
         # previous plan is there to fall back on), stalled SLSQP runs end early
         self.struggling = False
-        self.may_stall = previous_plan is not None
 
     def run(
         self, start: tuple[float, float, float, float], stance: tuple[float, float]
@@ -116,13 +131,22 @@ class StepSearch:
         theta_dot_plus)`` [rad, rad, -, rad/s] with the stance foot at ``stance`` [m].
 
         Raises:
-            PlanningError: no feasible plan (the deepest failure of the search).
+            PlanningError: no feasible plan (the deepest failure of the search), with the
+                feasible steps before it (``partial``) and the evaluations spent.
         """
         H = self.horizon
         reach = self.chains.reach(self.tmap, stance[0], H)
-        if reach < H:  # no chain of admissible footholds that long: no search can succeed
-            raise PlanningError(reach, "foothold", self.chains.reach_break(self.tmap, stance[0], H))
-        return self._steps(0, start, stance)
+        try:
+            if reach < H:  # no chain of admissible footholds that long: no search can succeed
+                raise PlanningError(
+                    reach, "foothold", self.chains.reach_break(self.tmap, stance[0], H)
+                )
+            return self._steps(0, start, stance)
+        except PlanningError as exc:
+            exc.partial = list(self.partial)
+            exc.evaluations = self.evaluations.used
+            exc.budget_exhausted = self.evaluations.exhausted
+            raise
 
     def _steps(self, j: int, start: tuple, stance: tuple[float, float]) -> list[StepPlan]:
         """Depth-first search over footholds: steps ``j .. H-1`` from ``start``."""
@@ -132,6 +156,8 @@ class StepSearch:
         for step in self._step_options(j, start, stance):
             if isinstance(step, PlanningError):
                 err = step
+                if self.deepest is None or err.step > self.deepest.step:
+                    self.partial = list(self.path[:j])
                 break
             nxt = (
                 step.theta_minus - step.coeffs[-1],
@@ -139,11 +165,12 @@ class StepSearch:
                 step.slope_plus,
                 step.delta * step.thetadot_minus,
             )
+            self.path[j:] = [step]
             try:
                 return [step, *self._steps(j + 1, nxt, step.foothold)]
             except PlanningError as e:
                 err = e
-                if self.budget <= 0:
+                if self.budget <= 0 or self.evaluations.exhausted:
                     break
         if self.deepest is None or (err is not None and err.step > self.deepest.step):
             self.deepest = err
@@ -177,7 +204,7 @@ class StepSearch:
         rounds = (1.0, 10.0)
         for wscale, i in [(w, i) for w in rounds for i in order]:
             sm.wscale = wscale
-            if self.budget <= 0:
+            if self.budget <= 0 or self.evaluations.exhausted:
                 break
             self.budget -= 1
             self.fresh = False  # set when an optimisation runs (reused solutions cost nothing)
@@ -213,10 +240,13 @@ class StepSearch:
                 else:
                     x02 = memo.hints.get(_hint_key(fh, fx2.foothold), x02)
             ev, ok = None, False
-            if fx2 is not None:
-                ev, ok = self._solve_pair(fx, x0, fx2, x02, keep)
-            if not ok:
-                ev, ok = self._solve(fx, x0, keep)
+            try:
+                if fx2 is not None:
+                    ev, ok = self._solve_pair(fx, x0, fx2, x02, keep)
+                if not ok:
+                    ev, ok = self._solve(fx, x0, keep)
+            except BudgetExhausted:
+                break
             if not self.fresh:
                 self.budget += 1
             if ok:
@@ -225,10 +255,12 @@ class StepSearch:
                 continue
             worst, name = worst_violation(ev["groups"])
             best_fail = max(best_fail, (worst, name, f"foothold x = {fh[0]:.3f} m"))
+        spent = self.budget <= 0 or self.evaluations.exhausted
+        note = "search budget exhausted" if spent and best_fail[1] else ""
         yield PlanningError(
             j,
             best_fail[1] or "search budget exhausted",
-            best_fail[2] + ("" if self.budget > 0 else "; search budget exhausted"),
+            "; ".join(filter(None, (best_fail[2], note))),
         )
 
     def _candidates(
@@ -254,11 +286,15 @@ class StepSearch:
     def _end_speed(self, foothold: tuple[float, float], q1m: float) -> float:
         """End-of-step ``theta_dot`` to aim at: the gait's, corrected by the potential energy the
         next step will gain or lose (slow down before a drop, speed up before a rise)."""
-        gait = self.gait
-        dh = float(self.tmap.height(foothold[0] + self.config.step_length)) - foothold[1]
+        gait, cfg = self.gait, self.config
         m22 = model.mass_matrix(self.P, q1m)[2]
-        f = gait.step.thetadot_minus**2 + 2.0 * model.weight(self.P) * dh / m22
-        return math.sqrt(max(f, (1.5 * self.config.min_thetadot) ** 2))
+        if cfg.energy_horizon > 0:
+            rise = 2.0 * model.weight(self.P) / m22  # theta_dot^2 a metre of rise costs
+            f = _energy_target(gait, self.tmap, foothold, cfg.step_length, cfg.energy_horizon, rise)
+        else:
+            dh = float(self.tmap.height(foothold[0] + cfg.step_length)) - foothold[1]
+            f = gait.step.thetadot_minus**2 + 2.0 * model.weight(self.P) * dh / m22
+        return math.sqrt(max(f, (1.5 * cfg.min_thetadot) ** 2))
 
     def _theta_target(self, theta_plus: float) -> float:
         """Preferred touchdown ``q2`` for a step starting at ``theta_plus``: the gait's, moved by
@@ -312,7 +348,7 @@ class StepSearch:
             e2 = sm.evaluate_batch(fx2, X[:, n:], slope=e1["slope_plus"], thetadot_plus=thd2)
             return e1["cost"] + e2["cost"], np.concatenate([e1["g"], e2["g"]], axis=1), e1
 
-        prob = BatchProblem(batch)
+        prob = BatchProblem(batch, self.evaluations)
         key = self._problem_key(fx, fx2)
         if key in memo.failed:
             return memo.failed[key], False
@@ -357,7 +393,7 @@ class StepSearch:
             ev = sm.evaluate_batch(fx, X)
             return ev["cost"], ev["g"], ev
 
-        prob = BatchProblem(batch)
+        prob = BatchProblem(batch, self.evaluations)
 
         def run(xs):
             x = prob.minimize(xs, self.config.max_iter, _FTOL, self.struggling)
@@ -395,6 +431,31 @@ class StepSearch:
             memo.failed[key] = ev
             self.struggling = self.may_stall
         return ev, ok2
+
+
+def _energy_target(
+    gait: PeriodicGait,
+    tmap: TerrainMap,
+    foothold: tuple[float, float],
+    step_length: float,
+    steps: int,
+    rise: float,
+) -> float:
+    """End-of-step ``theta_dot^2`` [rad^2/s^2] that reaches the gait's end speed ``steps``
+    steps after a step ending on ``foothold``, over footholds ``step_length`` apart: backward
+    through the closed-form map of the gait's step (``theta_dot-^2 = psi delta^2
+    theta_dot-^2 + Gam`` of the reduced dynamics, the impact's loss included), each step's rise
+    costing ``rise`` per metre."""
+    st = gait.step
+    a = float(st.psi_grid[-1]) * st.delta**2  # end speed^2 -> next end speed^2, on the flat
+    gam = float(st.gam_grid[-1])
+    h = [foothold[1]] + [
+        float(tmap.height(foothold[0] + k * step_length)) for k in range(1, steps + 1)
+    ]
+    f = st.thetadot_minus**2
+    for k in range(steps, 0, -1):
+        f = (f - gam + rise * (h[k] - h[k - 1])) / a
+    return f
 
 
 def _hint_key(stance: tuple[float, float], foothold: tuple[float, float]) -> tuple:

@@ -148,8 +148,16 @@ def test_replanning_walks_rough_terrain_from_perturbed_starts(terrain):
         )
         assert failure is None, f"{terrain} {z0}: {failure}"
         # the planner may fail now and then (its foothold rules near stair edges); the
-        # controller then carries on with the rest of the previous plan
-        assert all(r.fallback in (None, "previous plan") for r in recs), [r.reason for r in recs]
+        # controller then carries on with the rest of the previous plan; after a replanning
+        # search cut by its evaluation budget, with a shorter look-ahead or a relaxed plan
+        assert all(
+            r.fallback in (None, "previous plan")
+            or (
+                r.budget_exhausted
+                and r.fallback not in ("PD on the last planned step", "zero input")
+            )
+            for r in recs
+        ), [(r.fallback, r.reason) for r in recs]
         # each replanned step starts on its plan and stays close to it
         for r in recs[1:]:
             if r.fallback is None:

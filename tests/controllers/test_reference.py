@@ -72,12 +72,12 @@ def test_planning_failure_falls_back_without_crashing():
     assert np.all(np.isfinite(actions))
     assert policy.diagnostics["fallbacks"], "the planning failure must be recorded"
     kinds = {f[0] for f in policy.diagnostics["fallbacks"]}
-    assert kinds <= {
-        "shorter horizon",
-        "previous plan",
-        "PD on the last planned step",
-        "zero input",
-    }
+    assert all(
+        k in {"shorter horizon", "previous plan", "least violation", "PD on the last planned step"}
+        or k.startswith("relaxed: ")
+        or k == "zero input"
+        for k in kinds
+    ), kinds
 
 
 def test_bad_observations_and_modes_raise():

@@ -5,6 +5,7 @@ import numpy as np
 import pytest
 
 from controllers.planner import GaitPlanner
+from envs.physics.terrain import Terrain
 
 from .cases import CASES, PAPER_STAIRS
 
@@ -58,3 +59,22 @@ def test_reused_step_solutions_do_not_depend_on_other_terrains(planners):
     np.testing.assert_allclose(used.footholds, fresh.footholds)
     for a, b in zip(used, fresh):
         np.testing.assert_allclose(a.coeffs, b.coeffs, atol=1e-12)
+
+
+def test_a_rise_three_steps_ahead_speeds_up_the_current_step_with_the_energy_horizon(planners):
+    """With ``energy_horizon = 3`` the end speed each step aims at comes backwards from three
+    steps ahead (closed-form reduced dynamics and impact loss): a 1 cm rise about three step
+    lengths ahead speeds up the first step, which the one-step target (the default) ignores."""
+    gait = planners["paper"].periodic_gait()
+    start = ((gait.q, gait.qd), (0.0, 0.0))
+    flat, rise = Terrain.flat(), Terrain.stairs([0.53], [0.01])
+    one = planners["paper"]
+    three = GaitPlanner("paper", {"energy_horizon": 3})
+    speed = {
+        (name, t): pl.plan(terrain, *start, horizon=1).steps[0].thetadot_minus
+        for name, pl in (("one", one), ("three", three))
+        for t, terrain in (("flat", flat), ("rise", rise))
+    }
+    assert speed["one", "rise"] == speed["one", "flat"]
+    assert speed["three", "flat"] == pytest.approx(speed["one", "flat"], rel=1e-6)
+    assert speed["three", "rise"] > speed["three", "flat"] + 0.01

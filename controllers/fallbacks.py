@@ -1,0 +1,83 @@
+"""The degradation order of the transverse controller (``ControllerConfig.fallbacks``): its
+default, how its items are checked and stored, and how each is reported."""
+
+from __future__ import annotations
+
+from typing import Any
+
+from envs.config_util import real_setting
+
+from .planner import PlannerConfig
+
+__all__ = ["DEFAULT_FALLBACKS", "NAMED_FALLBACKS", "fallback_items", "fallback_name"]
+
+#: the named degradations of ``ControllerConfig.fallbacks`` (the others are relaxations)
+NAMED_FALLBACKS = ("previous plan", "least violation")
+
+#: default degradation order: the planning torque reserve (0.8 of ``u_max``) relaxed to 0.95,
+#: then to the limit, then the duration bounds too; the rest of the previous plan; the
+#: least-violating steps
+DEFAULT_FALLBACKS: tuple = (
+    (("torque_fraction", 0.95),),
+    (("torque_fraction", 1.0),),
+    (("duration_max", 3.0), ("duration_min", 0.05), ("torque_fraction", 1.0)),
+    "previous plan",
+    "least violation",
+)
+
+
+def fallback_items(raw: Any) -> tuple:
+    """``ControllerConfig.fallbacks`` in its stored form: names, and relaxations as sorted
+    ``(field, value)`` pairs.
+
+    Args:
+        raw: a sequence whose items are ``"previous plan"``, ``"least violation"`` or a
+            mapping (or ``(field, value)`` pairs) of :class:`PlannerConfig` fields to relaxed
+            values.
+
+    Raises:
+        ValueError: an item of another kind, an unknown field or a non-finite value.
+    """
+    allowed = (
+        "a list whose items are 'previous plan', 'least violation' or a mapping of "
+        "PlannerConfig fields to relaxed values"
+    )
+    if isinstance(raw, (str, bytes)) or not hasattr(raw, "__iter__"):
+        raise ValueError(f"ControllerConfig.fallbacks = {raw!r}; allowed: {allowed}")
+    out: list = []
+    planner_fields = set(PlannerConfig.__dataclass_fields__)
+    for item in raw:
+        if isinstance(item, str):
+            if item not in NAMED_FALLBACKS:
+                raise ValueError(f"ControllerConfig.fallbacks: unknown item {item!r}; {allowed}")
+            out.append(item)
+            continue
+        try:
+            pairs = dict(item.items() if hasattr(item, "items") else item)
+        except (TypeError, ValueError):
+            raise ValueError(
+                f"ControllerConfig.fallbacks: bad item {item!r}; allowed: {allowed}"
+            ) from None
+        bad = sorted(set(pairs) - planner_fields)
+        if bad or not pairs:
+            raise ValueError(
+                f"ControllerConfig.fallbacks: relaxation {item!r} names no or unknown "
+                f"PlannerConfig fields {bad}"
+            )
+        out.append(
+            tuple(
+                sorted(
+                    (str(k), real_setting(f"ControllerConfig.fallbacks: {k}", v))
+                    for k, v in pairs.items()
+                )
+            )
+        )
+    return tuple(out)
+
+
+def fallback_name(item: Any) -> str:
+    """How the degradation ``item`` (a stored item of :func:`fallback_items`) is reported in
+    ``StepRecord.fallback``."""
+    if isinstance(item, str):
+        return item
+    return "relaxed: " + ", ".join(f"{k}={v:g}" for k, v in item)

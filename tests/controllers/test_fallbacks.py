@@ -1,0 +1,84 @@
+"""The controller's degradation order when the full planning problem has no solution."""
+
+import numpy as np
+import pytest
+
+from controllers import ControllerConfig, GaitPlanner, TransverseController
+from controllers.fallbacks import DEFAULT_FALLBACKS
+from envs.physics.terrain import Terrain
+
+# a 7.5 mm rise the paper robot climbs with its hip input within 0.8 u_max but not within 0.3
+RISE = Terrain.stairs([0.33], [0.0075])
+TIGHT = {"torque_fraction": 0.3}  # the nominal gait needs 0.24 u_max
+# budgets large enough not to cut these searches (the order of degradations, budgets aside)
+ROOMY = {"replan_evaluations": 10**5}
+ROOMY_PLANNER = {"max_evaluations": 10**5}
+
+
+@pytest.fixture(scope="module")
+def gait():
+    return GaitPlanner("paper").periodic_gait()
+
+
+def walk(terrain, gait, config, planner=None, duration=4.0, steps=6):
+    ctrl = TransverseController("paper", terrain, config, planner)
+    out = ctrl.rollout(gait.q, gait.qd, duration, steps=steps)
+    return out, ctrl
+
+
+def test_a_relaxed_step_keeps_the_robot_walking_where_the_full_problem_has_none(gait):
+    relax = ControllerConfig(fallbacks=[{"torque_fraction": 0.8}], **ROOMY)
+    out, ctrl = walk(RISE, gait, relax, {**TIGHT, **ROOMY_PLANNER})
+    assert out["failure"] is None and len(out["impacts"]) >= 5
+    relaxed = [r for r in out["records"] if r.fallback == "relaxed: torque_fraction=0.8"]
+    assert relaxed, [r.fallback for r in out["records"]]
+    for r in relaxed:
+        assert r.reason.startswith("full problem: planning failed at step")
+        assert r.degradations == ["full problem", "relaxed: torque_fraction=0.8"]
+        assert np.isfinite(r.V_end) and r.ticks > 0  # tracked with the transverse feedback
+    assert all(r.fallback != "zero input" for r in out["records"])
+
+
+def test_without_degradations_the_same_course_ends_in_a_fall_or_zero_input(gait):
+    plain = ControllerConfig(fallbacks=[], **ROOMY)
+    out, _ = walk(RISE, gait, plain, {**TIGHT, **ROOMY_PLANNER})
+    kinds = [r.fallback for r in out["records"]]
+    assert "relaxed: torque_fraction=0.8" not in kinds
+    assert "PD on the last planned step" in kinds or out["failure"] is not None, kinds
+
+
+def test_least_violating_steps_replace_zero_input(gait):
+    """A 12.5 mm rise: no feasible step from the second footstep on; the least-violating steps
+    are tracked (input applied, upright to the end of the run) where the plain chain went limp
+    (zero input)."""
+    rise = Terrain.stairs([0.33], [0.0125])
+    plain, _ = walk(rise, gait, ControllerConfig(fallbacks=[], **ROOMY), ROOMY_PLANNER, 3.0)
+    assert "zero input" in [r.fallback for r in plain["records"]]
+    cfg = ControllerConfig(fallbacks=["least violation"], **ROOMY)
+    out, ctrl = walk(rise, gait, cfg, ROOMY_PLANNER, 3.0)
+    kinds = [r.fallback for r in out["records"]]
+    assert "least violation" in kinds and "zero input" not in kinds, kinds
+    assert out["failure"] is None and out["t"][-1] >= plain["t"][-1]
+    for r in out["records"]:
+        if r.fallback == "least violation":
+            assert r.degradations == ["full problem", "least violation"]
+            assert "least violation: worst violation" in r.reason
+            assert r.max_abs_u > 0 and r.ticks > 0 and np.isfinite(r.V_end)
+
+
+def test_degradation_order_is_configurable_and_validated():
+    cfg = ControllerConfig()
+    assert cfg.fallbacks == DEFAULT_FALLBACKS
+    assert ControllerConfig.from_dict(cfg.to_dict()) == cfg
+    custom = ControllerConfig.from_dict(
+        {"fallbacks": ["least violation", {"torque_fraction": 1.0, "duration_max": 2.0}]}
+    )
+    assert custom.fallbacks == (
+        "least violation",
+        (("duration_max", 2.0), ("torque_fraction", 1.0)),
+    )
+    for bad in ("least violation", ["zero input"], [{"no_such_field": 1.0}], [{}], [3]):
+        with pytest.raises(ValueError, match="fallbacks"):
+            ControllerConfig(fallbacks=bad)
+    with pytest.raises(ValueError, match="torque_fraction"):  # checked by the robot's planner
+        TransverseController("paper", "flat", {"fallbacks": [{"torque_fraction": 1.5}]})
