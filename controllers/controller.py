@@ -79,6 +79,7 @@ from envs.physics.terrain import Terrain, as_terrain
 from .fallbacks import DEFAULT_FALLBACKS, fallback_items, fallback_name
 from .feedback import constraint_at, feedback_law, thetadot_sq_at
 from .gains import GainTable, HorizonSolution, horizon_gains, pd_gains, step_models
+from .numerics import one_blas_thread
 from .planner import GaitPlanner, Plan, PlannerConfig, PlanningError, StepPlan
 from .transverse import StepModel
 
@@ -430,6 +431,7 @@ class TransverseController:
             np.asarray(q, float), np.asarray(qd, float), math.nan, first=False, new_step=False
         )
 
+    @one_blas_thread
     def _start_step(
         self, q: np.ndarray, qd: np.ndarray, t: float, first: bool, new_step: bool = True
     ) -> None:

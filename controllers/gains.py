@@ -25,6 +25,7 @@ import numpy as np
 from envs.physics.terrain import Terrain
 
 from .feedback import pack_scalars
+from .numerics import one_blas_thread
 from .riccati import solve_jump_riccati
 from .transverse import StepModel, impact_jacobian
 
@@ -156,6 +157,7 @@ class GainTable:
         return self.scalars, self.phi_coeffs, self.thetadot_sq, self.dthetadot_sq, self.gains
 
 
+@one_blas_thread
 def step_models(
     P: np.ndarray, steps: list[StepPlan], terrain: Terrain | None, margin: float = 0.15
 ) -> list[StepModel]:
@@ -168,6 +170,7 @@ def step_models(
     return out
 
 
+@one_blas_thread
 def horizon_gains(models: list[StepModel], config: ControllerConfig) -> HorizonSolution:
     """Linearise the steps and solve the jump-Riccati equation over them (current step first),
     with the weights and grid of ``config``.

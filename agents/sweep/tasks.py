@@ -7,47 +7,24 @@ policy, group, env, keyword arguments and swept values, then the episode's field
 ``distance``, ``speed``, ``motor_work``, ``cost_of_transport``, ...) and the robot's
 ``total_mass`` [kg] and ``gravity`` [m/s^2]. An episode depends on its cell and seed only, not
 on the episodes run before it in the same env, so any split into tasks gives the same records;
-and the linear algebra runs on one BLAS thread in every backend (a multithreaded BLAS sums in
-another order, and a walk on rough ground amplifies the last bits into different footholds).
-For the same reason the planner's periodic gaits, which every planner of the process shares,
-come from a cache of the tasks' own, filled on one thread: not from gaits computed earlier in
-the process under other settings.
+and the controller's linear algebra runs on one BLAS thread whatever the backend
+(:mod:`controllers.numerics`: a multithreaded BLAS sums in another order, and a walk on rough
+ground amplifies the last bits into different footholds).
 """
 
 from __future__ import annotations
 
 import math
 from collections.abc import Iterator, Sequence
-from contextlib import contextmanager
 from dataclasses import asdict, dataclass
 from typing import Any
 
-from threadpoolctl import threadpool_limits
-
 from agents.policies import BASELINES
 from agents.sweep.spec import Cell
-from controllers.planner.gait_planner import GaitPlanner
-from controllers.planner.periodic import GaitCache
 
 #: episodes per task when not given: enough to make a task's start-up (env, policy, a
 #: worker's imports) small beside its episodes, few enough to spread a cell over workers
 MAX_CHUNK = 10
-
-
-#: the periodic gaits of the planners of the tasks run in this process (one BLAS thread)
-_TASK_GAITS = GaitCache()
-
-
-@contextmanager
-def _task_arithmetic() -> Iterator[None]:
-    """One BLAS thread, and the planners' gaits from :data:`_TASK_GAITS`, inside."""
-    shared = GaitPlanner.gait_cache
-    GaitPlanner.gait_cache = _TASK_GAITS
-    try:
-        with threadpool_limits(limits=1):
-            yield
-    finally:
-        GaitPlanner.gait_cache = shared
 
 
 @dataclass(frozen=True)
@@ -95,17 +72,16 @@ def run_task(task: Task) -> Iterator[dict[str, Any]]:
     cell = task.cell
     if cell.policy_spec not in BASELINES:
         set_threads(1)  # one core per task; the same arithmetic in every worker
-    with _task_arithmetic():
-        env, policy, _, _ = make_eval_env(
-            cell.policy_spec, cell.env_id, cell.env_kwargs, **cell.policy_options
-        )
-        try:
-            base = env.unwrapped
-            mass, g = float(base.params.total_mass), float(base.params.g)
-            for seed in task.seeds:
-                yield episode_record(cell, run_episode(env, policy, seed), mass, g)
-        finally:
-            env.close()
+    env, policy, _, _ = make_eval_env(
+        cell.policy_spec, cell.env_id, cell.env_kwargs, **cell.policy_options
+    )
+    try:
+        base = env.unwrapped
+        mass, g = float(base.params.total_mass), float(base.params.g)
+        for seed in task.seeds:
+            yield episode_record(cell, run_episode(env, policy, seed), mass, g)
+    finally:
+        env.close()
 
 
 def run_task_list(task: Task) -> list[dict[str, Any]]:

@@ -13,6 +13,7 @@ import numpy as np
 from envs.config_util import finite_pair, integer_setting
 from envs.physics.params import RobotParams, as_params
 
+from ..numerics import one_blas_thread
 from .config import PlannerConfig, PlanningError
 from .footholds import FootholdChains, TerrainMap
 from .least_violation import least_violation_steps
@@ -81,6 +82,7 @@ class GaitPlanner:
         out._gait_source = self._gait_source
         return out
 
+    @one_blas_thread
     def periodic_gait(
         self, step_length: float | None = None, speed: float | None = None
     ) -> PeriodicGait:
@@ -107,6 +109,7 @@ class GaitPlanner:
             self.gait_cache.put(key, gait)
         return gait
 
+    @one_blas_thread
     def plan(
         self,
         terrain: Any,
@@ -148,6 +151,7 @@ class GaitPlanner:
         plan.solve_time = time.perf_counter() - t0
         return plan
 
+    @one_blas_thread
     def plan_least_violation(
         self,
         terrain: Any,
