@@ -41,9 +41,11 @@ def test_zero_perturbation_converges(ref):
 
 
 def test_huge_perturbations_fail_or_have_no_state(ref):
-    # 5 rad^2/s^2 more theta_dot^2 (2.3 instead of 0.84 rad/s): the walker trips at once
+    # 5 rad^2/s^2 more theta_dot^2 (2.3 instead of 0.84 rad/s): the degraded plans keep the
+    # walker going for a few footsteps, but it is far from the gait after them (or trips)
     s = run_perturbation(ref, [5.0, 0.0, 0.0], steps=4)
-    assert not s.converged and s.end == "trip" and s.footsteps == 0
+    assert not s.converged and s.end in ("trip", "not converged")
+    assert s.end == "trip" or s.V_end > 10.0
     # theta_dot^2 + I <= 0: no such state
     none = run_perturbation(ref, [-10.0, 0.0, 0.0], steps=4)
     assert none.end == NO_STATE and none.footsteps == 0
