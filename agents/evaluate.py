@@ -48,6 +48,9 @@ from controllers.controller import ControllerConfig, PDController, TransverseCon
 
 #: the baselines that take a controller mode (``--controller-mode``)
 CONTROLLED_BASELINES = ("pd", "reference")
+#: how the pd and reference baselines know where they are and what the ground is
+#: (``controllers.ReferencePolicy``'s ``localise`` and ``mapping``)
+PERCEPTION_MODES = ("known-map", "localise", "mapping")
 
 
 def eval_seeds(seed: int, episodes: int) -> list[int]:
@@ -356,6 +359,7 @@ def make_eval_env(
     algo: str | None = None,
     controller_mode: str | None = None,
     plan_steps: int | None = None,
+    perception: str | None = None,
 ) -> tuple[gym.Env, Policy, str, dict[str, Any]]:
     """The env (with the agent's wrappers) and the policy for ``policy_spec``.
 
@@ -369,6 +373,10 @@ def make_eval_env(
             baselines (None: their default, replan).
         plan_steps: footsteps of the fixed plan (fixed-plan only; None: sized for the env's
             episode, see :meth:`controllers.ControllerConfig.for_mode`).
+        perception: for the ``pd`` and ``reference`` baselines, one of ``PERCEPTION_MODES``:
+            ``known-map`` (None, their default: the course's map, the stance foot
+            dead-reckoned), ``localise`` (the stance foot located by the terrain scan on the
+            map) or ``mapping`` (plan on a map built from the scans, never the course).
 
     Returns:
         ``(env, policy, env_id, env_kwargs)``, with the env id and keyword arguments used.
@@ -380,6 +388,17 @@ def make_eval_env(
         )
     if plan_steps is not None and controller_mode != "fixed-plan":
         raise ValueError("plan_steps: applies to controller_mode fixed-plan only")
+    if perception is not None:
+        if perception not in PERCEPTION_MODES:
+            raise ValueError(f"perception = {perception!r}; allowed: {', '.join(PERCEPTION_MODES)}")
+        if policy_spec not in CONTROLLED_BASELINES:
+            raise ValueError(
+                f"perception: applies to the {' and '.join(CONTROLLED_BASELINES)} policies, "
+                f"not to {policy_spec}"
+            )
+    options: dict[str, Any] = {}
+    if perception in ("localise", "mapping"):
+        options[perception] = True
     trained = None
     if policy_spec not in BASELINES:
         trained = load_trained(policy_spec, vecnormalize=vecnormalize, algo=algo)
@@ -400,8 +419,10 @@ def make_eval_env(
                 f"{env.observation_space.shape}"
             )
         return env, trained, env_id, env_kwargs
-    if controller_mode is None:
+    if controller_mode is None and not options:
         return env, load_policy(policy_spec, env), env_id, env_kwargs
+    if controller_mode is None:
+        return env, make_baseline_policy(policy_spec, env, **options), env_id, env_kwargs
     steps = env.spec.max_episode_steps if env.spec is not None else None
     fields = {} if plan_steps is None else {"plan_steps": plan_steps}
     try:
@@ -411,7 +432,8 @@ def make_eval_env(
     except ValueError:
         env.close()
         raise
-    return env, make_baseline_policy(policy_spec, env, config=config), env_id, env_kwargs
+    policy = make_baseline_policy(policy_spec, env, config=config, **options)
+    return env, policy, env_id, env_kwargs
 
 
 def evaluate(
@@ -425,6 +447,7 @@ def evaluate(
     algo: str | None = None,
     controller_mode: str | None = None,
     plan_steps: int | None = None,
+    perception: str | None = None,
 ) -> Evaluation:
     """Evaluate a baseline (``passive``, ``pd``, ``reference``) or a trained model (path).
 
@@ -437,12 +460,12 @@ def evaluate(
         vecnormalize: a trained model's ``VecNormalize`` statistics (default: beside it).
         progress: show a progress bar.
         algo: a trained model's algorithm (default: from its run or the file).
-        controller_mode, plan_steps: the ``pd`` and ``reference`` baselines' controller mode
-            and fixed-plan length (see :func:`make_eval_env`).
+        controller_mode, plan_steps, perception: the ``pd`` and ``reference`` baselines'
+            controller mode, fixed-plan length and perception (see :func:`make_eval_env`).
     """
     seeds = eval_seeds(seed, episodes)
     env, policy, env_id, env_kwargs = make_eval_env(
-        policy_spec, env_id, env_kwargs, vecnormalize, algo, controller_mode, plan_steps
+        policy_spec, env_id, env_kwargs, vecnormalize, algo, controller_mode, plan_steps, perception
     )
     mass, g, _ = _robot(env)
     iterator: Any = seeds

@@ -42,6 +42,7 @@ from rich.table import Table
 from agents.config import TEST_SEED, parse_assignments
 from agents.evaluate import (
     CONTROLLED_BASELINES,
+    PERCEPTION_MODES,
     Evaluation,
     evaluate,
     learning_curve_data,
@@ -244,6 +245,13 @@ def configure(parser: argparse.ArgumentParser) -> None:
         "for the episode, 1.5 a second plus the look-ahead)",
     )
     parser.add_argument(
+        "--perception",
+        choices=PERCEPTION_MODES,
+        help=f"the {' and '.join(CONTROLLED_BASELINES)} policies' perception: the course's map "
+        "with a dead-reckoned stance foot (their default), the stance foot located by the "
+        "terrain scan on the map (localise), or a map built from the scans (mapping)",
+    )
+    parser.add_argument(
         "--json", type=output_file, metavar="FILE", help="write summary and episodes as JSON"
     )
     parser.add_argument(
@@ -299,6 +307,11 @@ def run(args: argparse.Namespace) -> int:
         )
     if args.plan_steps is not None and args.controller_mode != "fixed-plan":
         raise ValueError("--plan-steps: applies to --controller-mode fixed-plan only")
+    if args.perception is not None and args.policy not in CONTROLLED_BASELINES:
+        raise ValueError(
+            f"--perception: applies to the {' and '.join(CONTROLLED_BASELINES)} policies, "
+            f"not to {args.policy}"
+        )
     for option, path in (("--json", args.json), ("--csv", args.csv)):
         if path is not None and path.exists() and not args.overwrite:
             raise ValueError(
@@ -322,6 +335,7 @@ def run(args: argparse.Namespace) -> int:
             algo=args.algo,
             controller_mode=args.controller_mode,
             plan_steps=args.plan_steps,
+            perception=args.perception,
         )
     except ValueError as exc:
         message = str(exc)

@@ -16,6 +16,7 @@ from agents.evaluate import (
     Evaluation,
     eval_seeds,
     evaluate,
+    make_eval_env,
     plot_learning_curve,
     run_episode,
     write_csv,
@@ -190,3 +191,25 @@ def test_a_run_without_episodes_or_evaluations_has_no_learning_curve(tmp_path: P
     episodes, evals = learning_curve_data(tmp_path)
     assert len(episodes) == 0 and list(evals["timesteps"]) == [100, 200]
     assert plot_learning_curve(tmp_path, tmp_path / "curve.png").stat().st_size > 5000
+
+
+@pytest.mark.parametrize("perception", ["known-map", "localise", "mapping"])
+def test_perception_modes_reach_the_reference_estimator(perception):
+    env, policy, _, _ = make_eval_env(
+        "reference", "roughwalk/CompassGaitStairs-v0", perception=perception
+    )
+    est = policy.estimator
+    assert (est.localise, est.mapping) == (perception == "localise", perception == "mapping")
+    env.close()
+
+
+@pytest.mark.parametrize(
+    ("policy", "perception", "match"),
+    [
+        ("reference", "gps", r"perception = 'gps'; allowed: known-map, localise, mapping"),
+        ("passive", "localise", r"perception: applies to the pd and reference policies"),
+    ],
+)
+def test_bad_perception_is_a_clear_error(policy, perception, match):
+    with pytest.raises(ValueError, match=match):
+        make_eval_env(policy, "roughwalk/CompassGaitStairs-v0", perception=perception)
