@@ -1,0 +1,104 @@
+"""What the controller records about each footstep: :class:`StepRecord` (its plan, its
+tracking, its fallbacks and the per-footstep certificate values)."""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+
+__all__ = ["StepRecord"]
+
+
+@dataclass
+class StepRecord:
+    """What happened during one footstep (filled in while it runs).
+
+    Attributes:
+        index: footstep number since reset.
+        t_start: time at the start of the step [s] (NaN when unknown).
+        thetadot_start, thetadot_end: actual ``theta_dot`` at the first and last tick [rad/s].
+        thetadot_nominal: nominal ``(theta_dot+, theta_dot-)`` of the step [rad/s].
+        max_abs_y: largest ``|y|`` over the step [rad].
+        riccati_time: wall time of the step's Riccati solve [s]; solve_time: linearisation
+            plus Riccati [s]; plan_time: planner call [s] (0 when not replanned).
+        xperp_start, xperp_end: ``x_perp`` at the first and last tick of the step.
+        V_start, V_end: the Lyapunov value ``V = x_perp' P x_perp`` at the step's first tick
+            (just after the impact map, the start of tracking) and at its last tick (the
+            pre-impact side of the next touchdown), with ``P = Z^-1`` of the jump-Riccati
+            solution the step's feedback uses (the one solved at the step's start, or at a
+            replan within it), interpolated at the tick's phase as the gains are: at the first
+            tick ``P`` at about ``theta+``, at the last tick ``P`` at the phase just before the
+            impact (the solution's value before the jump, clamped at ``theta-`` if the
+            touchdown is late). NaN without gains; ``P = I`` for plain PD.
+        V_increase: largest increase of ``V`` between consecutive ticks within the planned
+            phase range ``[theta+, theta-]`` (should be about 0 or negative).
+        max_abs_u: largest ``|u|`` over the step [input units]; saturated: ticks at the
+            actuator limit.
+        fallback: None, ``"shorter horizon"`` (planning failed beyond the second step; the
+            look-ahead is cut there), a relaxation (``"relaxed: ..."``, possibly followed by
+            ``", shorter horizon"``), ``"previous plan"``, ``"least violation"``, ``"PD on the
+            last planned step"`` or ``"zero input"`` (see the module docstring); reason: the
+            planning errors of the degradations tried (``" | "`` between them).
+        plan_evaluations: step evaluations the planner calls of the step spent (all
+            degradations together; see :attr:`PlannerConfig.max_evaluations`).
+        budget_exhausted: a planner call of the step was cut by its search budget.
+        degradations: the degradations tried, in order (:attr:`ControllerConfig.fallbacks`
+            names; ``"full problem"`` first).
+        max_xperp_norm: largest Euclidean norm of ``x_perp = [I, y, y_dot]`` over the step
+            (0 without gains).
+    """
+
+    index: int
+    t_start: float = math.nan
+    thetadot_start: float = math.nan
+    thetadot_end: float = math.nan
+    thetadot_nominal: tuple[float, float] = (math.nan, math.nan)
+    max_abs_y: float = 0.0
+    riccati_time: float = math.nan
+    solve_time: float = math.nan
+    plan_time: float = 0.0
+    xperp_start: np.ndarray = field(default_factory=lambda: np.full(3, np.nan))
+    xperp_end: np.ndarray = field(default_factory=lambda: np.full(3, np.nan))
+    V_start: float = math.nan
+    V_end: float = math.nan
+    V_increase: float = 0.0
+    max_abs_u: float = 0.0
+    saturated: int = 0
+    ticks: int = 0
+    fallback: str | None = None
+    reason: str | None = None
+    max_xperp_norm: float = 0.0
+    plan_evaluations: int = 0
+    budget_exhausted: bool = False
+    degradations: list[str] = field(default_factory=list)
+
+    def certificate(self) -> dict[str, float | None]:
+        """The step's certificate values as plain data: ``V_start``, ``V_end``, ``V_ratio``,
+        ``max_xperp_norm``, ``max_abs_u``; None for what is unknown or not finite, and for
+        the ``V`` values of a step without Riccati gains (held with PD, or zero input)."""
+        riccati = self.fallback not in ("PD on the last planned step", "zero input")
+        values = {
+            "V_start": self.V_start if riccati else math.nan,
+            "V_end": self.V_end if riccati else math.nan,
+            "V_ratio": self.V_ratio if riccati else math.nan,
+            "max_xperp_norm": (
+                self.max_xperp_norm if self.ticks and self.fallback != "zero input" else math.nan
+            ),
+            "max_abs_u": self.max_abs_u if self.ticks else math.nan,
+        }
+        return {k: float(v) if math.isfinite(v) else None for k, v in values.items()}
+
+    @property
+    def V_ratio(self) -> float:
+        """``V_end / V_start``: below 1 when ``V`` fell over the step (NaN when either is
+        unknown; infinite when ``V_start`` is 0)."""
+        if not (self.V_start >= 0 and self.V_end >= 0):
+            return math.nan
+        if self.V_start == 0:
+            return math.inf if self.V_end > 0 else math.nan
+        return self.V_end / self.V_start
+
+
+# ---------------------------------------------------------------------------- controller
