@@ -9,9 +9,11 @@ from the scans). It never reads the true state.
 Every tick the state estimator (:class:`controllers.estimator.SensorStateEstimator`: encoders
 and contact switches decoded into ``q`` and the stance leg, the high-gain observer, touchdowns
 located on the terrain map) updates the estimate with the input applied over the last period,
-and the controller's input is applied to the estimate. At every located touchdown the
-controller replans from the mapped estimate. Shortly after the start, once the observer has
-converged (``settle_time``), the current step is replanned from the estimate.
+and the controller's input is applied to the estimate. In the default ``replan`` mode
+(:attr:`ControllerConfig.mode`) the controller replans from the mapped estimate at every
+located touchdown, and, shortly after the start, once the observer has converged
+(``settle_time``), replans the current step from the estimate. In ``fixed-plan`` mode it
+tracks the plan made at the start and only advances it at each touchdown.
 
 Safe behaviour: if planning fails, the controller degrades in the order of
 ``ControllerConfig.fallbacks`` (relaxed planning settings, the previous plan, the
