@@ -21,6 +21,7 @@ from .config import (
     load_config,
     parse_assignments,
 )
+from .curriculum import TerrainCurriculum
 from .evaluate import (
     EpisodeResult,
     Evaluation,
@@ -44,6 +45,9 @@ _LAZY = {
     "make_sb3_vec_env": "agents.sb3_vec_env",
     "HeldOutEvalCallback": "agents.callbacks",
     "SaveVecNormalizeOnBest": "agents.callbacks",
+    "CriticWarmup": "agents.callbacks",
+    "ResidualScaleRamp": "agents.callbacks",
+    "CurriculumLog": "agents.callbacks",
 }
 
 __all__ = [
@@ -57,15 +61,19 @@ __all__ = [
     "AgentConfig",
     "Comparison",
     "ConfigError",
+    "CriticWarmup",
+    "CurriculumLog",
     "EpisodeResult",
     "EstimatedStateObservation",
     "Evaluation",
     "HeldOutEvalCallback",
     "Policy",
+    "ResidualScaleRamp",
     "ResidualWrapper",
     "SB3VecEnv",
     "SaveVecNormalizeOnBest",
     "Setting",
+    "TerrainCurriculum",
     "TrainedPolicy",
     "ZeroPolicy",
     "build",

@@ -163,7 +163,12 @@ class TerrainCurriculum(gym.Wrapper, gym.utils.RecordConstructorArgs):
     def reset(
         self, *, seed: int | None = None, options: dict[str, Any] | None = None
     ) -> tuple[Any, dict[str, Any]]:
-        """Reset the env on a course of the current level (unless ``options`` name one)."""
+        """Reset the env on a course of the current level (unless ``options`` name one).
+
+        Args:
+            seed: episode seed; a new seed also draws the first level again.
+            options: the env's reset options (a ``"terrain"`` there is used as it is).
+        """
         if seed is not None:
             rng = np.random.default_rng([int(seed), LEVEL_STREAM])
             self.curriculum_level = int(rng.integers(0, self.max_initial_level + 1))
@@ -182,7 +187,11 @@ class TerrainCurriculum(gym.Wrapper, gym.utils.RecordConstructorArgs):
         return obs, info
 
     def step(self, action: Any) -> tuple[Any, float, bool, bool, dict[str, Any]]:
-        """Step the env; at the end of a counted episode, move the level."""
+        """Step the env; at the end of a counted episode, move the level.
+
+        Args:
+            action: the action for the wrapped env.
+        """
         obs, reward, terminated, truncated, info = self.env.step(action)
         self._steps += 1
         if (terminated or truncated) and self._counted:
