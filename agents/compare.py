@@ -29,6 +29,7 @@ from agents.runs import (
     check_writable,
     latest_run,
     read_manifest,
+    refuse_earlier_outputs,
 )
 from agents.train import run_dir_for, train
 from configs import CONFIG_DIR as _CONFIGS
@@ -233,12 +234,7 @@ def compare(
     if not dry_run:
         check_writable(out, "--out")
         check_writable(log_dir, "--log-dir")
-        earlier = [name for name in OUTPUTS if (Path(out) / name).exists()]
-        if earlier and not overwrite:
-            raise ValueError(
-                f"--out {out}: holds an earlier comparison ({', '.join(earlier)}); "
-                "choose another folder or pass --overwrite"
-            )
+        refuse_earlier_outputs(out, OUTPUTS, overwrite, "comparison")
     rows: list[dict[str, Any]] = []
     evaluations: list[Evaluation] = []
     for s in settings:

@@ -23,7 +23,7 @@ import pickle
 import re
 import tempfile
 import zipfile
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import Any, TextIO
 
@@ -53,6 +53,29 @@ def atomic_write(path: str | Path, write: Callable[[Path], Any]) -> Path:
     finally:
         tmp.unlink(missing_ok=True)
     return path
+
+
+def refuse_earlier_outputs(
+    out: str | Path, names: Sequence[str], overwrite: bool, what: str = "result"
+) -> None:
+    """Stop before any work when the folder ``out`` holds any of the files ``names`` of an
+    earlier run of a command, unless ``overwrite``.
+
+    Args:
+        out: the command's output folder (``--out``).
+        names: the file names the command writes there.
+        overwrite: the user's ``--overwrite``.
+        what: what those files are, for the message (e.g. ``"comparison"``).
+
+    Raises:
+        ValueError: naming the folder and the earlier files.
+    """
+    earlier = [name for name in names if (Path(out) / name).exists()]
+    if earlier and not overwrite:
+        raise ValueError(
+            f"--out {out}: holds an earlier {what} ({', '.join(earlier)}); choose another "
+            "folder or pass --overwrite"
+        )
 
 
 def atomic_write_stream(path: str | Path, write: Callable[[TextIO], Any]) -> Path:

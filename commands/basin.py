@@ -34,7 +34,7 @@ from typing import Any
 
 import numpy as np
 
-from agents.runs import atomic_write_stream
+from agents.runs import atomic_write_stream, refuse_earlier_outputs
 from agents.stats import wilson_interval
 from commands.cli import (
     CONTROLLER_KERNELS,
@@ -208,12 +208,7 @@ def run(args: argparse.Namespace) -> int:
     if any(b <= a for a, b in zip(radii, radii[1:])):
         raise ValueError(f"--radii: sizes must increase, got {radii}")
     out: Path = args.out
-    existing = [name for name in OUTPUTS if (out / name).exists()]
-    if existing and not args.overwrite:
-        raise ValueError(
-            f"--out {out}: holds an earlier result ({', '.join(existing)}); choose another "
-            "folder or pass --overwrite"
-        )
+    refuse_earlier_outputs(out, OUTPUTS, args.overwrite)
     announce_compilation(SIMULATOR_KERNELS + CONTROLLER_KERNELS)
     t0 = time.perf_counter()
     ref = periodic_reference(args.robot)

@@ -39,7 +39,7 @@ from agents.mfpt import (
     mfpt_sweep,
 )
 from agents.policies import BASELINES
-from agents.runs import atomic_write, atomic_write_stream
+from agents.runs import atomic_write, atomic_write_stream, refuse_earlier_outputs
 from commands.cli import (
     CONTROLLER_KERNELS,
     SIMULATOR_KERNELS,
@@ -251,12 +251,7 @@ def run(args: argparse.Namespace) -> int:
         policies[0], args.walks, args.walkers, args.step_cap, args.seed, args.max_step_time
     )
     out: Path = args.out
-    existing = [name for name in OUTPUTS if (out / name).exists()]
-    if existing and not args.overwrite:
-        raise ValueError(
-            f"--out {out}: holds an earlier result ({', '.join(existing)}); choose another "
-            "folder or pass --overwrite"
-        )
+    refuse_earlier_outputs(out, OUTPUTS, args.overwrite)
     announce_compilation(
         SIMULATOR_KERNELS + (CONTROLLER_KERNELS if policies != ["passive"] else ())
     )
