@@ -282,8 +282,9 @@ def test_fixed_plan_lyapunov_value_falls_from_footstep_to_footstep(terrain):
         assert max(r.max_abs_u for r in recs) < 5.0  # far from the actuator limit (15)
     else:
         assert V_start[0] == pytest.approx(0.0795, abs=0.002)
-        # the step before each stair is planned near the actuator limit and saturates it, so
-        # V settles at the hold's floor (about 0.006) after four steps instead of falling on
+        # the steps before the stairs are planned close to the actuator limit (up to 12 of 15,
+        # and u_max at times, depending on the plan's last bits), so V settles at the hold's
+        # floor (about 0.005) after four steps instead of falling on
         above = V_start > V_FLOOR
         assert above.sum() == 3
         assert all(r.V_ratio < 0.9 for r, a in zip(recs, above, strict=True) if a)
