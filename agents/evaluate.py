@@ -28,6 +28,7 @@ from __future__ import annotations
 
 import csv
 import json
+import math
 import zipfile
 from collections import Counter
 from collections.abc import Sequence
@@ -45,6 +46,7 @@ from agents.policies import BASELINES, Policy, make_baseline_policy
 from agents.runs import atomic_write_stream, find_vecnormalize, load_vecnormalize
 from agents.trained import TrainedPolicy, load_policy
 from controllers.controller import ControllerConfig, PDController, TransverseController
+from controllers.planner import PlannerConfig
 
 #: the baselines that take a controller mode (``--controller-mode``)
 CONTROLLED_BASELINES = ("pd", "reference")
@@ -360,6 +362,9 @@ def make_eval_env(
     controller_mode: str | None = None,
     plan_steps: int | None = None,
     perception: str | None = None,
+    planner: dict[str, Any] | None = None,
+    controller: dict[str, Any] | None = None,
+    observer_eps: float | None = None,
 ) -> tuple[gym.Env, Policy, str, dict[str, Any]]:
     """The env (with the agent's wrappers) and the policy for ``policy_spec``.
 
@@ -377,6 +382,13 @@ def make_eval_env(
             ``known-map`` (None, their default: the course's map, the stance foot
             dead-reckoned), ``localise`` (the stance foot located by the terrain scan on the
             map) or ``mapping`` (plan on a map built from the scans, never the course).
+        planner: for the ``pd`` and ``reference`` baselines, :class:`controllers.PlannerConfig`
+            fields that override the robot's preset (e.g. ``{"min_thetadot": 0.3}``).
+        controller: for the ``pd`` and ``reference`` baselines,
+            :class:`controllers.ControllerConfig` fields (e.g. ``{"horizon": 2}``; the mode is
+            ``controller_mode``'s).
+        observer_eps: for the ``pd`` and ``reference`` baselines, the high-gain observer's time
+            constant [s] (> 0; None: the policy's default, the paper's 0.02 s).
 
     Returns:
         ``(env, policy, env_id, env_kwargs)``, with the env id and keyword arguments used.
@@ -399,6 +411,28 @@ def make_eval_env(
     options: dict[str, Any] = {}
     if perception in ("localise", "mapping"):
         options[perception] = True
+    for name, value in (("planner", planner), ("controller", controller)):
+        if value is None:
+            continue
+        if policy_spec not in CONTROLLED_BASELINES:
+            raise ValueError(
+                f"{name}: applies to the {' and '.join(CONTROLLED_BASELINES)} policies, "
+                f"not to {policy_spec}"
+            )
+        if not isinstance(value, dict):
+            raise ValueError(f"{name} = {value!r}; allowed: a mapping of setting names to values")
+    if planner:
+        options["planner"] = dict(planner)
+    if observer_eps is not None:
+        if policy_spec not in CONTROLLED_BASELINES:
+            raise ValueError(
+                f"observer_eps: applies to the {' and '.join(CONTROLLED_BASELINES)} policies, "
+                f"not to {policy_spec}"
+            )
+        eps = float(observer_eps) if isinstance(observer_eps, (int, float)) else math.nan
+        if not (math.isfinite(eps) and eps > 0) or isinstance(observer_eps, bool):
+            raise ValueError(f"observer_eps = {observer_eps!r}; allowed: a number > 0 [s]")
+        options["eps"] = eps
     trained = None
     if policy_spec not in BASELINES:
         trained = load_trained(policy_spec, vecnormalize=vecnormalize, algo=algo)
@@ -419,16 +453,24 @@ def make_eval_env(
                 f"{env.observation_space.shape}"
             )
         return env, trained, env_id, env_kwargs
-    if controller_mode is None and not options:
+    if controller_mode is None and not options and not controller:
         return env, load_policy(policy_spec, env), env_id, env_kwargs
-    if controller_mode is None:
-        return env, make_baseline_policy(policy_spec, env, **options), env_id, env_kwargs
-    steps = env.spec.max_episode_steps if env.spec is not None else None
-    fields = {} if plan_steps is None else {"plan_steps": plan_steps}
+    fields = dict(controller or {})
     try:
-        config = ControllerConfig.for_mode(
-            controller_mode, None if steps is None else steps * env.unwrapped.dt, **fields
-        )
+        if controller_mode is None:
+            config = ControllerConfig(**fields)
+        else:
+            steps = env.spec.max_episode_steps if env.spec is not None else None
+            if plan_steps is not None:
+                fields["plan_steps"] = plan_steps
+            config = ControllerConfig.for_mode(
+                controller_mode, None if steps is None else steps * env.unwrapped.dt, **fields
+            )
+        if planner:
+            PlannerConfig.for_robot(env.unwrapped.robot.name, **planner)  # validate early
+    except TypeError as exc:
+        env.close()
+        raise ValueError(f"controller: {exc}") from exc
     except ValueError:
         env.close()
         raise

@@ -141,6 +141,16 @@ class ControllerConfig:
             deterministic bound on the replanning time (about 55 us per evaluation on one
             core), >= 1. The plan at :meth:`TransverseController.reset` (nothing to fall back
             on) runs its whole search.
+        tube_energy: replan within a step (replan mode) when the estimated state leaves the
+            plan's tube: ``|theta_dot^2 - theta_dot*^2(theta)|`` above this fraction of
+            ``theta_dot*^2(theta)`` (a push, a stall in the making, a plan made from a poor
+            estimate); 0 disables the energy test. >= 0.
+        tube_y: ... or ``|y|`` above this [rad]; 0 disables the test. >= 0.
+        tube_ticks: the state must stay out of the tube this many consecutive ticks (noise
+            must not trigger a replan), >= 1.
+        tube_phase: only while the step has covered at most this fraction of its phase range
+            ``[theta+, theta-]`` (room left to act), in [0, 1].
+        tube_replans: replans within one step at most (0 disables them), >= 0.
     """
 
     horizon: int = 3
@@ -154,11 +164,23 @@ class ControllerConfig:
     late_blend: float = 0.05
     fallbacks: tuple = DEFAULT_FALLBACKS
     replan_evaluations: int = 4000
+    tube_energy: float = 0.0
+    tube_y: float = 0.0
+    tube_ticks: int = 4
+    tube_phase: float = 0.6
+    tube_replans: int = 0
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "fallbacks", fallback_items(self.fallbacks))
-        for name in ("horizon", "grid", "plan_steps", "replan_evaluations"):
-            lo = {"horizon": 1, "grid": 4, "plan_steps": 2, "replan_evaluations": 1}[name]
+        lows = {
+            "horizon": 1,
+            "grid": 4,
+            "plan_steps": 2,
+            "replan_evaluations": 1,
+            "tube_ticks": 1,
+            "tube_replans": 0,
+        }
+        for name, lo in lows.items():
             v = integer_setting(f"ControllerConfig.{name}", getattr(self, name), lo)
             object.__setattr__(self, name, v)
         for name in ("Q", "Qj"):
@@ -181,6 +203,13 @@ class ControllerConfig:
         margin = real_setting("ControllerConfig.margin", self.margin, "[0, 0.5]")
         if not (0.0 <= margin <= 0.5):
             raise ValueError(f"ControllerConfig.margin = {self.margin!r}; allowed: [0, 0.5]")
+        for name in ("tube_energy", "tube_y", "tube_phase"):
+            v = real_setting(f"ControllerConfig.{name}", getattr(self, name), ">= 0")
+            hi = 1.0 if name == "tube_phase" else math.inf
+            if not (0.0 <= v <= hi):
+                allowed = "[0, 1]" if name == "tube_phase" else ">= 0"
+                raise ValueError(f"ControllerConfig.{name} = {v!r}; allowed: {allowed}")
+            object.__setattr__(self, name, v)
         if not isinstance(self.replan, (bool, np.bool_)):
             raise ValueError(f"ControllerConfig.replan = {self.replan!r}; allowed: True or False")
 
@@ -285,6 +314,8 @@ class TransverseController:
         self._stance = (0.0, 0.0)
         self._last_q2 = math.nan
         self._x = np.zeros(4)
+        self._theta_start = math.nan  # theta where the current step's tracking began
+        self._outside = 0  # consecutive ticks outside the plan's tube
 
     # ------------------------------------------------------------------ planning
     def reset(
@@ -353,6 +384,9 @@ class TransverseController:
             rec.fallback = rec.reason = None
             rec.plan_evaluations, rec.budget_exhausted, rec.degradations = 0, False, []
         self._last_q2 = float(q[1])
+        if new_step or not math.isfinite(self._theta_start):
+            self._theta_start = float(q[1])
+        self._outside = 0
         steps: list[StepPlan] | None = None
         if first or cfg.replan:
             n = cfg.horizon + 1 if cfg.replan else max(cfg.plan_steps, cfg.horizon + 1)
@@ -547,6 +581,14 @@ class TransverseController:
                 rec.ticks += 1
             return 0.0
         u, I, y, yd, _ = feedback_law(self.P, x, *self._law_args)
+        if rec is not None and self._leaves_tube(x[1], I, y, rec):
+            rec.retargets += 1
+            self._start_step(q.copy(), qd.copy(), math.nan, first=False, new_step=False)
+            rec.reason = " | ".join(filter(None, ("left the plan's tube: replanned", rec.reason)))
+            if self.gain_table is None:
+                rec.ticks += 1
+                return 0.0
+            u, I, y, yd, _ = feedback_law(self.P, x, *self._law_args)
         if rec is not None:
             z = np.array([I, y, yd])
             V = self.solution.lyapunov(z, x[1])
@@ -566,6 +608,24 @@ class TransverseController:
             rec.saturated += int(abs(u) >= self.robot.u_max)
             rec.ticks += 1
         return u
+
+    def _leaves_tube(self, theta: float, I: float, y: float, rec: StepRecord) -> bool:
+        """Whether the state has been outside the plan's tube (``ControllerConfig.tube_*``)
+        long enough, early enough in the step, for a replan within it."""
+        cfg = self.config
+        if not cfg.replan or rec.retargets >= cfg.tube_replans or self.solution is None:
+            return False
+        tab, _, thetadot_sq, dthetadot_sq, _ = self._law_args
+        ref = thetadot_sq_at(tab, thetadot_sq, dthetadot_sq, theta)
+        out = (cfg.tube_energy > 0 and abs(I) > cfg.tube_energy * max(ref, 1e-9)) or (
+            cfg.tube_y > 0 and abs(y) > cfg.tube_y
+        )
+        self._outside = self._outside + 1 if out else 0
+        if self._outside < cfg.tube_ticks:
+            return False
+        end = self.solution.steps[0].constraint.theta_minus
+        span = end - self._theta_start
+        return span > 0 and (theta - self._theta_start) <= cfg.tube_phase * span
 
     def __call__(self, t: float, q: np.ndarray, qd: np.ndarray) -> float:
         """Hip torque [N m] for :func:`envs.simulate` (detects impacts from the state)."""

@@ -46,6 +46,8 @@ class StepRecord:
         budget_exhausted: a planner call of the step was cut by its search budget.
         degradations: the degradations tried, in order (:attr:`ControllerConfig.fallbacks`
             names; ``"full problem"`` first).
+        retargets: replans within the step because the estimated state left the plan's tube
+            (``ControllerConfig.tube_*``).
         max_xperp_norm: largest Euclidean norm of ``x_perp = [I, y, y_dot]`` over the step
             (0 without gains).
     """
@@ -73,6 +75,7 @@ class StepRecord:
     plan_evaluations: int = 0
     budget_exhausted: bool = False
     degradations: list[str] = field(default_factory=list)
+    retargets: int = 0
 
     def certificate(self) -> dict[str, float | None]:
         """The step's certificate values as plain data: ``V_start``, ``V_end``, ``V_ratio``,

@@ -23,6 +23,7 @@ from agents.evaluate import (
     write_json,
 )
 from agents.policies import ZeroPolicy
+from controllers.planner import PlannerConfig
 
 SLOPE = "roughwalk/CompassGaitSlope-v0"
 FLAT = "roughwalk/CompassGaitFlat-v0"
@@ -213,3 +214,38 @@ def test_perception_modes_reach_the_reference_estimator(perception):
 def test_bad_perception_is_a_clear_error(policy, perception, match):
     with pytest.raises(ValueError, match=match):
         make_eval_env(policy, "roughwalk/CompassGaitStairs-v0", perception=perception)
+
+
+def test_planner_controller_and_observer_options_reach_the_reference_policy():
+    env, policy, _, _ = make_eval_env(
+        "reference",
+        "roughwalk/CompassGaitStairs-v0",
+        planner={"min_thetadot": 0.45},
+        controller={"horizon": 2},
+        observer_eps=0.03,
+    )
+    ctrl = policy.controller
+    assert ctrl.planner.config.min_thetadot == 0.45
+    # the rest of the planner config is the robot preset's
+    assert ctrl.planner.config.target_speed == PlannerConfig.for_robot("paper").target_speed
+    assert ctrl.config.horizon == 2 and ctrl.config.mode == "replan"
+    assert policy.estimator.observer.eps == 0.03
+    env.close()
+
+
+@pytest.mark.parametrize(
+    ("policy", "options", "match"),
+    [
+        ("reference", {"planner": {"min_thetadot": -1}}, r"min_thetadot"),
+        ("reference", {"planner": {"speed": 1}}, r"speed"),
+        ("reference", {"controller": {"horizon": 0}}, r"horizon"),
+        ("reference", {"controller": {"gain": 1}}, r"controller: .*gain"),
+        ("reference", {"observer_eps": 0.0}, r"observer_eps = 0.0; allowed: a number > 0"),
+        ("reference", {"observer_eps": "fast"}, r"observer_eps = 'fast'; allowed"),
+        ("passive", {"planner": {"min_thetadot": 0.3}}, r"planner: applies to the pd and"),
+        ("passive", {"observer_eps": 0.03}, r"observer_eps: applies to the pd and reference"),
+    ],
+)
+def test_bad_controller_options_are_clear_errors(policy, options, match):
+    with pytest.raises(ValueError, match=match):
+        make_eval_env(policy, "roughwalk/CompassGaitStairs-v0", **options)

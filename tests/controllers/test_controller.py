@@ -352,3 +352,64 @@ def test_controller_modes():
         ControllerConfig.for_mode("fixed-plan", -1.0)
     with pytest.raises(ValueError, match="give the mode, not replan"):
         ControllerConfig.for_mode("replan", replan=False)
+
+
+def tube_loop(z0, steps, **config):
+    """Plan from the nominal flat-ground start, start ``z0`` off it in transverse coordinates,
+    replan at every footstep with ``config``; returns (failure, records)."""
+    ctrl = TransverseController("paper", TERRAINS["flat"], ControllerConfig(**config))
+    gait = ctrl.planner.periodic_gait()
+    ctrl.reset(gait.q, gait.qd)
+    x0 = state_from_z(ctrl.solution.steps[0], gait.q[1], np.asarray(z0, float))
+    sim = Simulator(ctrl.robot, ctrl.terrain, 1, dt=DT)
+    sim.reset(x0[:2], x0[2:])
+    b = model.input_gain(ctrl.P)
+    while len(ctrl.records) <= steps:
+        ev = sim.step(b * ctrl.control(sim.q[0].copy(), sim.qd[0].copy()))
+        if ev.status[0]:
+            return sim.failure(0), ctrl.records
+        assert sim.t[0] < 3.0 * steps, "no impact: the walker stalled"
+        if ev.n_impacts[0]:
+            ctrl.on_impact(sim.q[0].copy(), sim.qd[0].copy(), tuple(sim.stance_foot[0]), sim.t[0])
+    return None, ctrl.records[:-1]
+
+
+@pytest.mark.parametrize("deficit", [-0.2, -0.25])
+def test_replanning_within_a_step_rescues_a_start_slower_than_planned(deficit):
+    """theta_dot^2 below the plan's by 0.2-0.25 rad^2/s^2 (a quarter to a third of it: a push,
+    a lighter robot, a poor velocity estimate at the impact): tracking the plan trips; leaving
+    the tube replans the rest of the step from the actual state, and the walker goes on."""
+    z0 = (deficit, 0.0, 0.0)
+    failure, recs = tube_loop(z0, 4)
+    assert failure == "trip" and recs[0].retargets == 0
+    failure, recs = tube_loop(z0, 4, tube_energy=0.25, tube_replans=1)
+    assert failure is None and len(recs) == 4
+    assert recs[0].retargets == 1 and "left the plan's tube" in recs[0].reason
+    assert recs[0].fallback is None  # the replan solved the full problem
+    assert [r.retargets for r in recs[1:]] == [0, 0, 0]  # on the plan again after the impact
+
+
+def test_the_tube_is_left_alone_in_fixed_plan_mode_and_when_switched_off():
+    z0 = (-0.2, 0.0, 0.0)
+    for config in (
+        {"tube_energy": 0.25, "tube_replans": 0},
+        {"tube_energy": 0.0, "tube_y": 0.0, "tube_replans": 1},
+        {"tube_energy": 0.25, "tube_replans": 1, "replan": False, "plan_steps": 6},
+    ):
+        _, recs = tube_loop(z0, 2, **config)
+        assert all(r.retargets == 0 for r in recs), config
+
+
+@pytest.mark.parametrize(
+    ("field", "value", "match"),
+    [
+        ("tube_energy", -0.1, r"tube_energy = -0.1; allowed: >= 0"),
+        ("tube_y", math.nan, r"tube_y"),
+        ("tube_phase", 1.5, r"tube_phase = 1.5; allowed: \[0, 1\]"),
+        ("tube_ticks", 0, r"tube_ticks"),
+        ("tube_replans", -1, r"tube_replans"),
+    ],
+)
+def test_bad_tube_settings_are_clear_errors(field, value, match):
+    with pytest.raises(ValueError, match=match):
+        ControllerConfig(**{field: value})
