@@ -379,16 +379,17 @@ def make_eval_env(
         plan_steps: footsteps of the fixed plan (fixed-plan only; None: sized for the env's
             episode, see :meth:`controllers.ControllerConfig.for_mode`).
         perception: for the ``pd`` and ``reference`` baselines, one of ``PERCEPTION_MODES``:
-            ``known-map`` (None, their default: the course's map, the stance foot
-            dead-reckoned), ``localise`` (the stance foot located by the terrain scan on the
-            map) or ``mapping`` (plan on a map built from the scans, never the course).
+            ``known-map`` (the course's map, the stance foot dead-reckoned from the model),
+            ``localise`` (None, their default where the env has a scanner: the stance foot
+            located by the terrain scan on the map) or ``mapping`` (plan on a map built from
+            the scans, never the course).
         planner: for the ``pd`` and ``reference`` baselines, :class:`controllers.PlannerConfig`
             fields that override the robot's preset (e.g. ``{"min_thetadot": 0.3}``).
         controller: for the ``pd`` and ``reference`` baselines,
             :class:`controllers.ControllerConfig` fields (e.g. ``{"horizon": 2}``; the mode is
             ``controller_mode``'s).
         observer_eps: for the ``pd`` and ``reference`` baselines, the high-gain observer's time
-            constant [s] (> 0; None: the policy's default, the paper's 0.02 s).
+            constant [s] (> 0; None: the policy's default, 0.04 s; the paper's: 0.02 s).
 
     Returns:
         ``(env, policy, env_id, env_kwargs)``, with the env id and keyword arguments used.
@@ -409,8 +410,9 @@ def make_eval_env(
                 f"not to {policy_spec}"
             )
     options: dict[str, Any] = {}
-    if perception in ("localise", "mapping"):
-        options[perception] = True
+    if perception is not None:
+        options["localise"] = perception == "localise"
+        options["mapping"] = perception == "mapping"
     for name, value in (("planner", planner), ("controller", controller)):
         if value is None:
             continue

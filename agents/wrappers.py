@@ -16,6 +16,7 @@ import numpy as np
 from gymnasium import spaces
 
 from controllers.estimator import SensorStateEstimator
+from controllers.observer import DEFAULT_EPS
 from envs.physics.actuator import input_from_action
 
 VELOCITY_LIMIT = 50.0  # [rad/s]: estimated velocities are clipped to this in the observation
@@ -48,7 +49,7 @@ class EstimatedStateObservation(gym.Wrapper, gym.utils.RecordConstructorArgs):
         eps: observer time constant [s].
     """
 
-    def __init__(self, env: gym.Env, eps: float = 0.02) -> None:
+    def __init__(self, env: gym.Env, eps: float = DEFAULT_EPS) -> None:
         gym.utils.RecordConstructorArgs.__init__(self, eps=eps)
         gym.Wrapper.__init__(self, env)
         self.estimator = SensorStateEstimator(env, eps)

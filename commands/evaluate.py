@@ -248,8 +248,9 @@ def configure(parser: argparse.ArgumentParser) -> None:
         "--perception",
         choices=PERCEPTION_MODES,
         help=f"the {' and '.join(CONTROLLED_BASELINES)} policies' perception: the course's map "
-        "with a dead-reckoned stance foot (their default), the stance foot located by the "
-        "terrain scan on the map (localise), or a map built from the scans (mapping)",
+        "with a dead-reckoned stance foot (known-map), the stance foot located by the "
+        "terrain scan on the map (localise, their default), or a map built from the scans "
+        "(mapping)",
     )
     parser.add_argument(
         "--json", type=output_file, metavar="FILE", help="write summary and episodes as JSON"

@@ -76,7 +76,7 @@ from envs.physics.params import RobotParams, as_params
 from envs.physics.simulator import SimConfig, Simulator
 from envs.physics.terrain import Terrain, as_terrain
 
-from .fallbacks import DEFAULT_FALLBACKS, fallback_items, fallback_name
+from .fallbacks import DEFAULT_FALLBACKS, TUBE_FALLBACKS, fallback_items, fallback_name
 from .feedback import constraint_at, feedback_law, thetadot_sq_at
 from .gains import GainTable, HorizonSolution, horizon_gains, pd_gains, step_models
 from .numerics import one_blas_thread
@@ -151,6 +151,10 @@ class ControllerConfig:
         tube_phase: only while the step has covered at most this fraction of its phase range
             ``[theta+, theta-]`` (room left to act), in [0, 1].
         tube_replans: replans within one step at most (0 disables them), >= 0.
+        tube_fallbacks: the degradations a replan within a step tries, in order (items as in
+            ``fallbacks``; the full problem is not tried first). Default
+            :data:`TUBE_FALLBACKS`: ``duration_min`` 0.05 s with the torque limit, then the
+            current plan.
     """
 
     horizon: int = 3
@@ -164,14 +168,16 @@ class ControllerConfig:
     late_blend: float = 0.05
     fallbacks: tuple = DEFAULT_FALLBACKS
     replan_evaluations: int = 4000
-    tube_energy: float = 0.0
+    tube_energy: float = 0.25
     tube_y: float = 0.0
     tube_ticks: int = 4
     tube_phase: float = 0.6
-    tube_replans: int = 0
+    tube_replans: int = 1
+    tube_fallbacks: tuple = TUBE_FALLBACKS
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "fallbacks", fallback_items(self.fallbacks))
+        object.__setattr__(self, "tube_fallbacks", fallback_items(self.tube_fallbacks))
         lows = {
             "horizon": 1,
             "grid": 4,
@@ -308,7 +314,8 @@ class TransverseController:
         self._torque_gain = float(model.input_gain(self.P))  # hip torque per input unit [N m]
         self._plan_offset = 0
         self._relaxed: dict[tuple, GaitPlanner] = {}  # relaxed planners, by relaxation
-        for level in self.config.fallbacks:  # a relaxation out of range fails here
+        for level in (*self.config.fallbacks, *self.config.tube_fallbacks):
+            # a relaxation out of range fails here
             if level != "previous plan":
                 self._planner_for(level)
         self._stance = (0.0, 0.0)
@@ -373,7 +380,13 @@ class TransverseController:
 
     @one_blas_thread
     def _start_step(
-        self, q: np.ndarray, qd: np.ndarray, t: float, first: bool, new_step: bool = True
+        self,
+        q: np.ndarray,
+        qd: np.ndarray,
+        t: float,
+        first: bool,
+        new_step: bool = True,
+        within: bool = False,
     ) -> None:
         cfg = self.config
         if new_step or not self.records:
@@ -392,7 +405,8 @@ class TransverseController:
             n = cfg.horizon + 1 if cfg.replan else max(cfg.plan_steps, cfg.horizon + 1)
             t0 = time.perf_counter()
             previous = self.plan if cfg.replan else None
-            steps = self._plan_steps(q, qd, n, first, new_step, previous, rec)
+            levels = cfg.tube_fallbacks if within else (None, *cfg.fallbacks)
+            steps = self._plan_steps(q, qd, n, first, new_step, previous, rec, levels)
             rec.plan_time = time.perf_counter() - t0
         else:
             self._plan_offset += 1
@@ -435,15 +449,16 @@ class TransverseController:
         new_step: bool,
         previous: Plan | None,
         rec: StepRecord,
+        levels: tuple,
     ) -> list[StepPlan] | None:
-        """Plan ``n`` steps from ``(q, qd)``; when the full problem has no solution, degrade in
-        the order of ``ControllerConfig.fallbacks`` (module docstring). Records what it did in
-        ``rec``; returns the steps to track (None: nothing)."""
+        """Plan ``n`` steps from ``(q, qd)`` trying ``levels`` in order (None: the full
+        problem; then degradations as in ``ControllerConfig.fallbacks``, module docstring).
+        Records what it did in ``rec``; returns the steps to track (None: nothing)."""
         single: list[StepPlan] = []  # the first lone step found (held with PD if nothing else)
         notes: list[str] = []
         left = self.config.replan_evaluations
         cap = self.planner.config.max_evaluations
-        for level in (None, *self.config.fallbacks):
+        for level in levels:
             name = "full problem" if level is None else fallback_name(level)
             rec.degradations.append(name)
             if level == "previous plan":
@@ -583,7 +598,9 @@ class TransverseController:
         u, I, y, yd, _ = feedback_law(self.P, x, *self._law_args)
         if rec is not None and self._leaves_tube(x[1], I, y, rec):
             rec.retargets += 1
-            self._start_step(q.copy(), qd.copy(), math.nan, first=False, new_step=False)
+            self._start_step(
+                q.copy(), qd.copy(), math.nan, first=False, new_step=False, within=True
+            )
             rec.reason = " | ".join(filter(None, ("left the plan's tube: replanned", rec.reason)))
             if self.gain_table is None:
                 rec.ticks += 1

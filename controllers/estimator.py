@@ -39,6 +39,7 @@ from envs.physics.terrain import Terrain
 from .localisation import LocalisationResult, ScanLocaliser
 from .mapping import ScanMap
 from .observer import (
+    DEFAULT_EPS,
     HighGainObserver,
     observer_impact,
     observer_update,
@@ -95,7 +96,7 @@ class SensorStateEstimator:
     def __init__(
         self,
         env: gym.Env,
-        eps: float = 0.02,
+        eps: float = DEFAULT_EPS,
         initial_velocity: tuple[float, float] | None = None,
         localise: bool = False,
         mapping: bool = False,

@@ -9,7 +9,13 @@ from envs.config_util import real_setting
 
 from .planner import PlannerConfig
 
-__all__ = ["DEFAULT_FALLBACKS", "NAMED_FALLBACKS", "fallback_items", "fallback_name"]
+__all__ = [
+    "DEFAULT_FALLBACKS",
+    "NAMED_FALLBACKS",
+    "TUBE_FALLBACKS",
+    "fallback_items",
+    "fallback_name",
+]
 
 #: the named degradations of ``ControllerConfig.fallbacks`` (the others are relaxations)
 NAMED_FALLBACKS = ("previous plan", "least violation")
@@ -23,6 +29,15 @@ DEFAULT_FALLBACKS: tuple = (
     (("duration_max", 3.0), ("duration_min", 0.05), ("torque_fraction", 1.0)),
     "previous plan",
     "least violation",
+)
+
+#: what a replan within a step (the state left the plan's tube) tries: the motion must change
+#: now, so the torque reserve and the shortest duration are relaxed at once; if that fails the
+#: current plan is kept (the least-violating steps, tried here too, did worse on validation
+#: courses with pushes)
+TUBE_FALLBACKS: tuple = (
+    (("duration_min", 0.05), ("torque_fraction", 1.0)),
+    "previous plan",
 )
 
 

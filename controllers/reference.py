@@ -37,6 +37,7 @@ from envs.physics.actuator import action_from_input, input_from_action
 
 from .controller import ControllerConfig, PDController, TransverseController
 from .estimator import IMPACT, START, SensorStateEstimator
+from .observer import DEFAULT_EPS
 from .planner import GaitPlanner, PlannerConfig
 
 __all__ = ["PDPolicy", "ReferencePolicy", "make_reference_policy"]
@@ -49,7 +50,8 @@ class ReferencePolicy:
         env: the environment (as ``gym.make`` returns it; wrappers are looked through).
         config: :class:`ControllerConfig` or dict (default: replan at every footstep, h = 3).
         planner: :class:`GaitPlanner`, :class:`PlannerConfig`, dict or None (robot default).
-        eps: observer time constant [s] (paper: 0.02).
+        eps: observer time constant [s] (default :data:`controllers.observer.DEFAULT_EPS`,
+            0.04; the paper's: 0.02).
         settle_time: time after the start at which the current step is replanned from the
             observer's estimate [s].
         initial_velocity: velocity guess ``(q1d, q2d)`` [rad/s] for the observer at the start;
@@ -59,7 +61,9 @@ class ReferencePolicy:
             :attr:`history` (nominal: ``q1, q1d, q2d`` of the current step at the estimated
             phase).
         localise: correct the stance foot at each touchdown from the terrain scan matched
-            against the map (:class:`SensorStateEstimator`).
+            against the map (:class:`SensorStateEstimator`; default: on, unless ``mapping``;
+            off, the stance foot is dead-reckoned from the model). Needs the scanner
+            (``sensors.scan_count >= 2``): without it the default is off.
         mapping: plan on a map built from the terrain scans as the robot walks, never reading
             the true course (:class:`SensorStateEstimator`).
         odometry_error: relative standard deviation of a dead-reckoned step length (the
@@ -74,15 +78,18 @@ class ReferencePolicy:
         env: gym.Env,
         config: ControllerConfig | dict | None = None,
         planner: GaitPlanner | PlannerConfig | dict | None = None,
-        eps: float = 0.02,
+        eps: float = DEFAULT_EPS,
         settle_time: float = 0.1,
         initial_velocity: tuple[float, float] | None = None,
         record_history: bool = False,
-        localise: bool = False,
+        localise: bool | None = None,
         mapping: bool = False,
         odometry_error: float = 0.02,
         **controller_kwargs: Any,
     ):
+        if localise is None:
+            layout = getattr(env.unwrapped, "sensor_layout", None)
+            localise = not mapping and getattr(layout, "scan_count", 0) >= 2
         est = self.estimator = SensorStateEstimator(
             env, eps, initial_velocity, localise, mapping, odometry_error
         )

@@ -65,6 +65,10 @@ class PlannerConfig:
         max_rise, max_drop: largest height gain / loss in one step [m].
         duration_min, duration_max: step duration bounds [s] (Assumption 1).
         min_thetadot: least ``theta_dot`` over every step [rad/s].
+        end_thetadot_floor: least end-of-step ``theta_dot`` the planner aims at [rad/s] (a
+            speed reserve before drops, where the end speed is otherwise lowered by the
+            height the next step loses; at least ``1.5 * min_thetadot``). A target, not a
+            constraint: a step that cannot reach it is still feasible.
         gait_min_thetadot: least ``theta_dot`` of the nominal periodic gait [rad/s] (a reserve of
             kinetic energy for rises; the larger of the two applies to the gait).
         torque_fraction: nominal ``|u|`` stays below this fraction of ``u_max``.
@@ -129,6 +133,7 @@ class PlannerConfig:
     duration_min: float = 0.2
     duration_max: float = 1.5
     min_thetadot: float = 0.2
+    end_thetadot_floor: float = 0.0
     gait_min_thetadot: float = 0.0
     torque_fraction: float = 0.8
     clearance: float = 0.004
@@ -191,7 +196,8 @@ class PlannerConfig:
         nonneg = (
             "edge_margin drop_margin rise_margin max_rise max_drop clearance "
             "lookahead_rise arm_clearance retracted_clearance face_clearance touchdown_slope "
-            "gait_min_thetadot w_speed w_end w_shape w_torque w_slope time_budget"
+            "gait_min_thetadot end_thetadot_floor w_speed w_end w_shape w_torque w_slope "
+            "time_budget"
         ).split()
         for name in nonneg:
             if not getattr(self, name) >= 0:

@@ -294,7 +294,7 @@ class StepSearch:
         else:
             dh = float(self.tmap.height(foothold[0] + cfg.step_length)) - foothold[1]
             f = gait.step.thetadot_minus**2 + 2.0 * model.weight(self.P) * dh / m22
-        return math.sqrt(max(f, (1.5 * cfg.min_thetadot) ** 2))
+        return math.sqrt(max(f, (1.5 * cfg.min_thetadot) ** 2, cfg.end_thetadot_floor**2))
 
     def _theta_target(self, theta_plus: float) -> float:
         """Preferred touchdown ``q2`` for a step starting at ``theta_plus``: the gait's, moved by

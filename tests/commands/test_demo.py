@@ -36,18 +36,19 @@ def test_the_default_duration_is_the_whole_episode(capsys):
     out = capsys.readouterr().out
     assert f"in {limit:.2f} s" in out
     rows = [line for line in out.splitlines() if line.split() and line.split()[0].isdigit()]
-    # three steps on the flat, one down each stair, and on: 11 touchdowns in 10 s; the step in
+    # two steps on the flat, one down each stair, and on: 13 touchdowns in 10 s; the step in
     # progress at the time limit is the last row, marked as such
-    assert "walked: 11 footsteps" in out
+    assert "walked: 13 footsteps" in out
     assert "unfinished" in rows[-1] or "unfinished" in rows[-2]
 
 
-def test_the_walk_takes_three_steps_on_the_flat_before_the_stairs():
+def test_the_walk_takes_two_steps_on_the_flat_before_the_stairs():
     res = demo.rollout(STAIRS, seed=0, duration=4.0)
     feet = res["foot"]
     heights = [y for i, (x, y) in enumerate(feet) if i == 0 or (feet[i - 1] != feet[i]).any()]
-    assert heights[:4] == [0.0, 0.0, 0.0, 0.0]  # the start foot and three touchdowns on top
-    assert heights[4] == pytest.approx(-0.03)  # then the first stair
+    assert heights[:3] == [0.0, 0.0, 0.0]  # the start foot and two touchdowns on top
+    assert heights[3] == pytest.approx(-0.03)  # then one down each stair
+    assert heights[4] == pytest.approx(-0.06)
 
 
 def test_demo_rollout_and_table_rows():

@@ -66,6 +66,16 @@ def closed_loop(cls, terrain, z0, steps, replan=False, robot="paper", end=None, 
     return None, ctrl.records[:-1]
 
 
+#: what a step that left the plan's tube and was replanned within may report as its fallback
+TUBE_REPLANNED = ("relaxed: duration_min=0.05, torque_fraction=1", "previous plan")
+
+
+def tube_replanned(rec):
+    """Whether ``rec`` is a step replanned within (the state left the plan's tube), with the
+    tube's relaxation or, if that failed, the plan it was on."""
+    return rec.retargets > 0 and rec.fallback in TUBE_REPLANNED
+
+
 def contraction_rate(values):
     """Per-step contraction of a positive sequence (least-squares fit of its logarithm)."""
     k = np.arange(len(values))
@@ -152,6 +162,7 @@ def test_replanning_walks_rough_terrain_from_perturbed_starts(terrain):
         # search cut by its evaluation budget, with a shorter look-ahead or a relaxed plan
         assert all(
             r.fallback in (None, "previous plan")
+            or tube_replanned(r)
             or (
                 r.budget_exhausted
                 and r.fallback not in ("PD on the last planned step", "zero input")
@@ -208,16 +219,19 @@ def test_config_validation():
 def test_value_of_feedback_on_the_paper_stairs():
     """Named case "paper stairs, slower start": one fixed plan over the paper's course, started
     with the speed along the motion off by I = -0.1 rad^2/s^2 (theta_dot about 0.78 instead of
-    0.84 rad/s at the start). Plain PD on y leaves the speed error to the hybrid zero dynamics
-    and the robot falls (trips or slips) on the way down the stairs; the transverse controller
-    walks nine steps, down both stairs and on, and removes 90 % of the speed error."""
+    0.84 rad/s at the start), planned without the speed reserve before drops
+    (``end_thetadot_floor = 0``; with it PD walks this case too). Plain PD on y leaves the speed
+    error to the hybrid zero dynamics and the robot falls (trips or slips) on the way down the
+    stairs; the transverse controller walks nine steps, down both stairs and on, and removes
+    90 % of the speed error."""
     stairs = TERRAINS["paper_stairs"]
     z0 = (-0.1, 0.0, 0.0)
-    failure, recs = closed_loop(TransverseController, stairs, z0, steps=9)
+    bare = {"end_thetadot_floor": 0.0}
+    failure, recs = closed_loop(TransverseController, stairs, z0, steps=9, planner=bare)
     assert failure is None
     assert all(r.fallback is None for r in recs)
     assert abs(recs[-1].xperp_end[0]) < 0.1 * abs(z0[0])
-    failure_pd, recs_pd = closed_loop(PDController, stairs, z0, steps=7)
+    failure_pd, recs_pd = closed_loop(PDController, stairs, z0, steps=7, planner=bare)
     assert failure_pd in ("trip", "slip", "fall")
     assert len(recs_pd) < 7
 
@@ -281,13 +295,13 @@ def test_fixed_plan_lyapunov_value_falls_from_footstep_to_footstep(terrain):
         assert 0.1 <= norms[0] < 0.14 and np.all(np.diff(norms) < 0)
         assert max(r.max_abs_u for r in recs) < 5.0  # far from the actuator limit (15)
     else:
-        assert V_start[0] == pytest.approx(0.0795, abs=0.002)
+        assert V_start[0] == pytest.approx(0.202, abs=0.005)
         # the steps before the stairs are planned close to the actuator limit (up to 12 of 15,
         # and u_max at times, depending on the plan's last bits), so V settles at the hold's
         # floor (about 0.005) after four steps instead of falling on
         above = V_start > V_FLOOR
         assert above.sum() == 3
-        assert all(r.V_ratio < 0.9 for r, a in zip(recs, above, strict=True) if a)
+        assert all(r.V_ratio < 0.95 for r, a in zip(recs, above, strict=True) if a)
         assert 8.0 < max(r.max_abs_u for r in recs) <= ctrl.robot.u_max
     # V_end(k) or V_start(k+1) below V_start(k) at every footstep above the floor; V_start
     # itself falls there
@@ -305,8 +319,10 @@ def test_replanning_starts_every_footstep_at_zero(terrain):
     failure, recs = closed_loop(
         TransverseController, TERRAINS[terrain], CERT_Z0, steps=5, replan=True
     )
-    # a replan cut by its search budget keeps a shorter look-ahead: still a fresh plan
-    assert failure is None and all(r.fallback in (None, "shorter horizon") for r in recs)
+    # a replan cut by its search budget keeps a shorter look-ahead: still a fresh plan; the
+    # perturbed first step leaves the plan's tube and is replanned within
+    assert failure is None
+    assert all(r.fallback in (None, "shorter horizon") or tube_replanned(r) for r in recs)
     assert recs[0].V_start > 0.05  # the first step runs on the plan made at reset
     for r in recs[1:]:
         assert r.V_start < 1e-12 and np.abs(r.xperp_start).max() < 1e-6
@@ -380,12 +396,13 @@ def test_replanning_within_a_step_rescues_a_start_slower_than_planned(deficit):
     a lighter robot, a poor velocity estimate at the impact): tracking the plan trips; leaving
     the tube replans the rest of the step from the actual state, and the walker goes on."""
     z0 = (deficit, 0.0, 0.0)
-    failure, recs = tube_loop(z0, 4)
+    failure, recs = tube_loop(z0, 4, tube_replans=0)
     assert failure == "trip" and recs[0].retargets == 0
-    failure, recs = tube_loop(z0, 4, tube_energy=0.25, tube_replans=1)
+    failure, recs = tube_loop(z0, 4)  # the default: tube_energy 0.25, one replan per step
+    assert ControllerConfig().tube_energy == 0.25 and ControllerConfig().tube_replans == 1
     assert failure is None and len(recs) == 4
     assert recs[0].retargets == 1 and "left the plan's tube" in recs[0].reason
-    assert recs[0].fallback is None  # the replan solved the full problem
+    assert recs[0].fallback.startswith("relaxed: ")  # the tube replan relaxes at once
     assert [r.retargets for r in recs[1:]] == [0, 0, 0]  # on the plan again after the impact
 
 

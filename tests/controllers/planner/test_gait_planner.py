@@ -3,21 +3,28 @@
 import numpy as np
 import pytest
 
-from controllers.planner import PlanningError, TerrainMap
+from controllers.planner import GaitPlanner, PlanningError, TerrainMap
 from envs.physics.terrain import Terrain
 
 from .cases import PAPER_STAIRS
 
 
 def test_plan_from_scanned_heights_matches_the_true_terrain(planners):
-    pl = planners["paper"]
-    g = pl.periodic_gait()
+    """A map from heights scanned every 1 cm puts every foothold at the true ground's height.
+    Without the speed reserve before drops the plan is the true terrain's to the scan's
+    spacing; with it (the preset) the map's edges, 5 mm off at most, tip the choice between
+    two foothold chains near the first stair (two steps on the top or three), both feasible."""
     xs = np.arange(-0.2, 1.6, 0.01)
     scan = TerrainMap.from_scan(xs, PAPER_STAIRS.height(xs))
-    a = pl.plan(PAPER_STAIRS, (g.q, g.qd), (0.0, 0.0), horizon=5)
-    b = pl.plan(scan, (g.q, g.qd), (0.0, 0.0), horizon=5)
-    np.testing.assert_allclose(b.footholds[:, 1], a.footholds[:, 1])
-    np.testing.assert_allclose(b.footholds[:, 0], a.footholds[:, 0], atol=0.011)
+    for pl in (GaitPlanner("paper", {"end_thetadot_floor": 0.0}), planners["paper"]):
+        g = pl.periodic_gait()
+        a = pl.plan(PAPER_STAIRS, (g.q, g.qd), (0.0, 0.0), horizon=5)
+        b = pl.plan(scan, (g.q, g.qd), (0.0, 0.0), horizon=5)
+        np.testing.assert_allclose(b.footholds[:, 1], PAPER_STAIRS.height(b.footholds[:, 0]))
+        np.testing.assert_allclose(b.footholds[0], a.footholds[0])
+        if pl.config.end_thetadot_floor == 0.0:
+            np.testing.assert_allclose(b.footholds[:, 1], a.footholds[:, 1])
+            np.testing.assert_allclose(b.footholds[:, 0], a.footholds[:, 0], atol=0.011)
 
 
 @pytest.mark.parametrize(

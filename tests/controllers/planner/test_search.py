@@ -78,3 +78,23 @@ def test_a_rise_three_steps_ahead_speeds_up_the_current_step_with_the_energy_hor
     assert speed["one", "rise"] == speed["one", "flat"]
     assert speed["three", "flat"] == pytest.approx(speed["one", "flat"], rel=1e-6)
     assert speed["three", "rise"] > speed["three", "flat"] + 0.01
+
+
+def test_the_end_speed_floor_keeps_a_speed_reserve_before_a_drop(planners):
+    """Before a drop the end speed a step aims at is lowered by the height the next step loses
+    (down to ``1.5 min_thetadot``); ``end_thetadot_floor`` keeps it higher, so a push or a
+    lighter robot does not stall the step. Elsewhere it changes nothing."""
+    assert planners["paper"].config.end_thetadot_floor == 0.8
+    gait = planners["paper"].periodic_gait()
+    start = ((gait.q, gait.qd), (0.0, 0.0))
+    drop, flat = Terrain.stairs([0.2], [-0.03]), Terrain.flat()
+    floored = GaitPlanner("paper", {"end_thetadot_floor": 0.8})  # the preset's
+    plain = GaitPlanner("paper", {"end_thetadot_floor": 0.0})
+    end = {
+        (name, t): pl.plan(terrain, *start, horizon=1).steps[0].thetadot_minus
+        for name, pl in (("plain", plain), ("floored", floored))
+        for t, terrain in (("drop", drop), ("flat", flat))
+    }
+    assert end["plain", "drop"] < end["plain", "flat"] - 0.1  # slowed down before the drop
+    assert end["floored", "drop"] > end["plain", "drop"] + 0.05
+    assert end["floored", "flat"] == pytest.approx(end["plain", "flat"], rel=1e-9)
