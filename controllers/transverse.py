@@ -46,6 +46,11 @@ __all__ = [
 _H = 1e-30  # complex-step size
 
 
+def _dense(a: float, b: float, n: int = 256) -> np.ndarray:
+    """A uniform grid of ``n + 1`` phases on ``[a, b]`` [rad]."""
+    return np.linspace(a, b, n + 1)
+
+
 @dataclass
 class StepModel:
     """Nominal motion of one step and its transverse coordinates.
@@ -100,14 +105,18 @@ class StepModel:
             psi_s, gam_s = ChebyshevSeries(psi, a, b), ChebyshevSeries(gam, a, b)
             fa = (self.thetadot_plus**2 - gam_s(c.theta_plus)) / psi_s(c.theta_plus)
             F_nodes = psi * fa + gam
-            if np.all(F_nodes > 0):
+            # positive at the nodes and between them (the interpolant can dip below zero
+            # between nodes on a step that nearly stalls, and theta_dot = sqrt(F) is taken
+            # on other grids)
+            F_min = min(F_nodes.min(), ChebyshevSeries(F_nodes, a, b)(_dense(a, b)).min())
+            if F_min > 0:
                 break
         if not np.all(sign * al > 1e-12):
             raise ValueError("StepModel: alpha(theta) vanishes on the step (singular constraint)")
-        if np.any(F_nodes <= 0):
+        if not F_min > 0:
             raise ValueError(
                 "StepModel: the nominal theta_dot^2 is not positive over the step "
-                f"(min {F_nodes.min():.3g} rad^2/s^2): the walker would stall"
+                f"(min {F_min:.3g} rad^2/s^2): the walker would stall"
             )
         self.margin = margin
         self._F = ChebyshevSeries(F_nodes, a, b)

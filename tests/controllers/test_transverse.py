@@ -151,3 +151,30 @@ def test_margin_shrinks_where_the_continued_constraint_is_singular():
     ref = StepModel(P, c, 0.7753035964756947, margin=0.0)
     on = np.linspace(c.theta_plus, c.theta_minus, 201)
     np.testing.assert_allclose(m.thetadot_sq(on), ref.thetadot_sq(on), atol=1e-6)
+
+
+def test_theta_dot_squared_stays_positive_between_the_chebyshev_nodes():
+    """A slow step with a sharply bent constraint (planned from a basin start 3-4 units of
+    ``sqrt(V)`` off the gait): with its 15 % margins ``theta_dot^2`` is positive at the Chebyshev
+    nodes but dips below zero between them, and ``theta_dot = sqrt(F)`` on the gain grid was
+    NaN (silent: the feedback then applied zero input). The margins now shrink until it is
+    positive everywhere on the range."""
+    P = RobotParams.from_preset("paper").vector()
+    a = [
+        -0.4027158415806616,
+        -0.3937959122157784,
+        7.389249615112188,
+        -1.5133353531748073,
+        0.25435639694546675,
+        0.4410665218416667,
+    ]
+    c = BezierConstraint(np.array(a), -0.2013579207903308, 0.22053326092083336)
+    m = StepModel(P, c, 0.39185373744840823, margin=0.15)
+    assert 0.0 < m.margin < 0.15
+    lo, hi = c.theta_plus - m.margin * c.span, c.theta_minus + m.margin * c.span
+    assert np.all(m.thetadot_sq(np.linspace(lo, hi, 4001)) > 0)
+    on = np.linspace(c.theta_plus, c.theta_minus, 81)
+    assert all(np.all(np.isfinite(x)) for x in m.phase_matrices(on))
+    ref = StepModel(P, c, 0.39185373744840823, margin=0.0)
+    # the constraint bends sharply: 48 Chebyshev nodes resolve the profile to 0.01 rad^2/s^2
+    np.testing.assert_allclose(m.thetadot_sq(on), ref.thetadot_sq(on), atol=0.01)
