@@ -492,6 +492,9 @@ def evaluate(
     controller_mode: str | None = None,
     plan_steps: int | None = None,
     perception: str | None = None,
+    planner: dict[str, Any] | None = None,
+    controller: dict[str, Any] | None = None,
+    observer_eps: float | None = None,
 ) -> Evaluation:
     """Evaluate a baseline (``passive``, ``pd``, ``reference``) or a trained model (path).
 
@@ -504,12 +507,24 @@ def evaluate(
         vecnormalize: a trained model's ``VecNormalize`` statistics (default: beside it).
         progress: show a progress bar.
         algo: a trained model's algorithm (default: from its run or the file).
-        controller_mode, plan_steps, perception: the ``pd`` and ``reference`` baselines'
-            controller mode, fixed-plan length and perception (see :func:`make_eval_env`).
+        controller_mode, plan_steps, perception, planner, controller, observer_eps: the ``pd``
+            and ``reference`` baselines' controller mode, fixed-plan length, perception,
+            planner and controller settings and observer time constant (see
+            :func:`make_eval_env`).
     """
     seeds = eval_seeds(seed, episodes)
     env, policy, env_id, env_kwargs = make_eval_env(
-        policy_spec, env_id, env_kwargs, vecnormalize, algo, controller_mode, plan_steps, perception
+        policy_spec,
+        env_id,
+        env_kwargs,
+        vecnormalize,
+        algo,
+        controller_mode,
+        plan_steps,
+        perception,
+        planner,
+        controller,
+        observer_eps,
     )
     mass, g, _ = _robot(env)
     iterator: Any = seeds

@@ -253,6 +253,29 @@ def configure(parser: argparse.ArgumentParser) -> None:
         "(mapping)",
     )
     parser.add_argument(
+        "--planner",
+        nargs="+",
+        type=_env_kwarg,
+        metavar="KEY=VALUE",
+        help=f"the {' and '.join(CONTROLLED_BASELINES)} policies' gait-planner settings "
+        "(PlannerConfig fields over the robot's preset, e.g. end_thetadot_floor=0)",
+    )
+    parser.add_argument(
+        "--controller",
+        nargs="+",
+        type=_env_kwarg,
+        metavar="KEY=VALUE",
+        help=f"the {' and '.join(CONTROLLED_BASELINES)} policies' controller settings "
+        "(ControllerConfig fields, e.g. tube_replans=0)",
+    )
+    parser.add_argument(
+        "--observer-eps",
+        type=float,
+        metavar="S",
+        help=f"the {' and '.join(CONTROLLED_BASELINES)} policies' observer time constant [s] "
+        "(default 0.04; the paper's: 0.02)",
+    )
+    parser.add_argument(
         "--json", type=output_file, metavar="FILE", help="write summary and episodes as JSON"
     )
     parser.add_argument(
@@ -337,6 +360,9 @@ def run(args: argparse.Namespace) -> int:
             controller_mode=args.controller_mode,
             plan_steps=args.plan_steps,
             perception=args.perception,
+            planner=dict(args.planner) if args.planner else None,
+            controller=dict(args.controller) if args.controller else None,
+            observer_eps=args.observer_eps,
         )
     except ValueError as exc:
         message = str(exc)

@@ -215,3 +215,26 @@ def test_the_controller_mode_is_checked_before_any_episode(capsys, episode_count
     assert main([*argv, "--policy", "reference", "--controller-mode", "fixed"]) == 2
     assert "invalid choice: 'fixed'" in capsys.readouterr().err
     assert episode_count[0] == 0
+
+
+def test_controller_settings_from_the_command_line(tmp_path: Path, capsys, episode_count):
+    """``--planner``, ``--controller`` and ``--observer-eps`` reach the reference policy (here:
+    its first-wave settings, on one course); bad ones are one-line errors before any episode."""
+    argv = ["evaluate", "--env", STAIRS, "--episodes", "1", "--no-progress"]
+    bad = [
+        (["--policy", "reference", "--planner", "speed=1"], "unknown planner setting"),
+        (["--policy", "reference", "--controller", "horizon=0"], "ControllerConfig.horizon = 0"),
+        (["--policy", "reference", "--observer-eps", "0"], "observer_eps = 0.0; allowed"),
+        (["--policy", "passive", "--observer-eps", "0.02"], "applies to the pd and reference"),
+    ]
+    for extra, message in bad:
+        assert main([*argv, *extra]) == 2
+        err = capsys.readouterr().err
+        assert message in err and len(err.strip().splitlines()) == 1, err
+    assert episode_count[0] == 0
+    out = tmp_path / "first_wave.json"
+    first_wave = ["--perception", "known-map", "--observer-eps", "0.02"]
+    first_wave += ["--planner", "end_thetadot_floor=0", "--controller", "tube_replans=0"]
+    assert main([*argv, "--policy", "reference", *first_wave, "--json", str(out)]) == 0
+    data = json.loads(out.read_text())
+    assert data["summary"]["success_rate"] == 1.0 and episode_count[0] == 1
