@@ -28,7 +28,6 @@ from __future__ import annotations
 
 import csv
 import json
-import math
 import zipfile
 from collections import Counter
 from collections.abc import Sequence
@@ -47,6 +46,7 @@ from agents.runs import atomic_write_stream, find_vecnormalize, load_vecnormaliz
 from agents.trained import TrainedPolicy, load_policy
 from controllers.controller import ControllerConfig, PDController, TransverseController
 from controllers.planner import PlannerConfig
+from envs.config_util import real_setting
 
 #: the baselines that take a controller mode (``--controller-mode``)
 CONTROLLED_BASELINES = ("pd", "reference")
@@ -394,45 +394,33 @@ def make_eval_env(
     Returns:
         ``(env, policy, env_id, env_kwargs)``, with the env id and keyword arguments used.
     """
-    if controller_mode is not None and policy_spec not in CONTROLLED_BASELINES:
-        raise ValueError(
-            f"controller_mode: applies to the {' and '.join(CONTROLLED_BASELINES)} policies, "
-            f"not to {policy_spec}"
-        )
-    if plan_steps is not None and controller_mode != "fixed-plan":
-        raise ValueError("plan_steps: applies to controller_mode fixed-plan only")
-    if perception is not None:
-        if perception not in PERCEPTION_MODES:
-            raise ValueError(f"perception = {perception!r}; allowed: {', '.join(PERCEPTION_MODES)}")
-        if policy_spec not in CONTROLLED_BASELINES:
-            raise ValueError(
-                f"perception: applies to the {' and '.join(CONTROLLED_BASELINES)} policies, "
-                f"not to {policy_spec}"
-            )
-    options: dict[str, Any] = {}
-    if perception is not None:
-        options["localise"] = perception == "localise"
-        options["mapping"] = perception == "mapping"
-    for name, value in (("planner", planner), ("controller", controller)):
-        if value is None:
-            continue
-        if policy_spec not in CONTROLLED_BASELINES:
+    settings = {
+        "controller_mode": controller_mode,
+        "perception": perception,
+        "planner": planner,
+        "controller": controller,
+        "observer_eps": observer_eps,
+    }
+    for name, value in settings.items():
+        if value is not None and policy_spec not in CONTROLLED_BASELINES:
             raise ValueError(
                 f"{name}: applies to the {' and '.join(CONTROLLED_BASELINES)} policies, "
                 f"not to {policy_spec}"
             )
-        if not isinstance(value, dict):
+    if plan_steps is not None and controller_mode != "fixed-plan":
+        raise ValueError("plan_steps: applies to controller_mode fixed-plan only")
+    options: dict[str, Any] = {}
+    if perception is not None:
+        if perception not in PERCEPTION_MODES:
+            raise ValueError(f"perception = {perception!r}; allowed: {', '.join(PERCEPTION_MODES)}")
+        options["localise"] = perception == "localise"
+        options["mapping"] = perception == "mapping"
+    for name, value in (("planner", planner), ("controller", controller)):
+        if value is not None and not isinstance(value, dict):
             raise ValueError(f"{name} = {value!r}; allowed: a mapping of setting names to values")
-    if planner:
-        options["planner"] = dict(planner)
     if observer_eps is not None:
-        if policy_spec not in CONTROLLED_BASELINES:
-            raise ValueError(
-                f"observer_eps: applies to the {' and '.join(CONTROLLED_BASELINES)} policies, "
-                f"not to {policy_spec}"
-            )
-        eps = float(observer_eps) if isinstance(observer_eps, (int, float)) else math.nan
-        if not (math.isfinite(eps) and eps > 0) or isinstance(observer_eps, bool):
+        eps = real_setting("observer_eps", observer_eps, "a number > 0 [s]")
+        if not eps > 0:
             raise ValueError(f"observer_eps = {observer_eps!r}; allowed: a number > 0 [s]")
         options["eps"] = eps
     trained = None
@@ -455,7 +443,7 @@ def make_eval_env(
                 f"{env.observation_space.shape}"
             )
         return env, trained, env_id, env_kwargs
-    if controller_mode is None and not options and not controller:
+    if controller_mode is None and not options and not planner and not controller:
         return env, load_policy(policy_spec, env), env_id, env_kwargs
     fields = dict(controller or {})
     try:
@@ -469,7 +457,7 @@ def make_eval_env(
                 controller_mode, None if steps is None else steps * env.unwrapped.dt, **fields
             )
         if planner:
-            PlannerConfig.for_robot(env.unwrapped.robot.name, **planner)  # validate early
+            options["planner"] = PlannerConfig.for_robot(env.unwrapped.robot.name, **planner)
     except TypeError as exc:
         env.close()
         raise ValueError(f"controller: {exc}") from exc

@@ -72,7 +72,8 @@ class SensorStateEstimator:
             default: the environment's nominal start velocity (its configuration, not the
             episode's true state), else zero.
         localise: correct the stance foot at each touchdown by matching the terrain scan against
-            the map (needs ``scan_count >= 2``).
+            the map (needs ``scan_count >= 2``); None: wherever the env has that scanner and
+            ``mapping`` is off (the reference policy's default).
         mapping: plan on a map built from the scans (no access to the true course); the
             origin of its frame is the first stance foot (heights relative to it).
         odometry_error: standard deviation of a dead-reckoned step length, relative to the step
@@ -98,7 +99,7 @@ class SensorStateEstimator:
         env: gym.Env,
         eps: float = DEFAULT_EPS,
         initial_velocity: tuple[float, float] | None = None,
-        localise: bool = False,
+        localise: bool | None = False,
         mapping: bool = False,
         odometry_error: float = 0.02,
     ) -> None:
@@ -124,11 +125,14 @@ class SensorStateEstimator:
         self.initial_velocity = np.asarray(initial_velocity, dtype=np.float64)
         self._nsub_td = 16
         self.offsets = np.asarray(self.layout.scan_offsets, dtype=np.float64)
+        sensors = getattr(getattr(u, "settings", None), "sensors", None)
+        scans = sensors is not None and self.offsets.size >= 2
+        if localise is None:
+            localise = scans and not mapping
         self.localise, self.mapping = bool(localise), bool(mapping)
         if not (math.isfinite(odometry_error) and odometry_error >= 0):
             raise ValueError(f"odometry_error = {odometry_error!r} out of range; allowed: >= 0")
-        sensors = getattr(getattr(u, "settings", None), "sensors", None)
-        if (self.localise or self.mapping) and (sensors is None or self.offsets.size < 2):
+        if (self.localise or self.mapping) and not scans:
             raise ValueError(
                 "localise and mapping read the terrain scan: the env needs sensors.scan_count >= 2"
             )

@@ -87,9 +87,6 @@ class ReferencePolicy:
         odometry_error: float = 0.02,
         **controller_kwargs: Any,
     ):
-        if localise is None:
-            layout = getattr(env.unwrapped, "sensor_layout", None)
-            localise = not mapping and getattr(layout, "scan_count", 0) >= 2
         est = self.estimator = SensorStateEstimator(
             env, eps, initial_velocity, localise, mapping, odometry_error
         )

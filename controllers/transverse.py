@@ -46,11 +46,6 @@ __all__ = [
 _H = 1e-30  # complex-step size
 
 
-def _dense(a: float, b: float, n: int = 256) -> np.ndarray:
-    """A uniform grid of ``n + 1`` phases on ``[a, b]`` [rad]."""
-    return np.linspace(a, b, n + 1)
-
-
 @dataclass
 class StepModel:
     """Nominal motion of one step and its transverse coordinates.
@@ -108,7 +103,8 @@ class StepModel:
             # positive at the nodes and between them (the interpolant can dip below zero
             # between nodes on a step that nearly stalls, and theta_dot = sqrt(F) is taken
             # on other grids)
-            F_min = min(F_nodes.min(), ChebyshevSeries(F_nodes, a, b)(_dense(a, b)).min())
+            dense = np.linspace(a, b, 257)
+            F_min = min(F_nodes.min(), ChebyshevSeries(F_nodes, a, b)(dense).min())
             if F_min > 0:
                 break
         if not np.all(sign * al > 1e-12):
