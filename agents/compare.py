@@ -15,7 +15,9 @@ from __future__ import annotations
 
 import datetime as dt
 import json
-from dataclasses import dataclass
+from collections import Counter
+from collections.abc import Sequence
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
@@ -31,7 +33,10 @@ from agents.runs import (
     read_manifest,
     refuse_earlier_outputs,
 )
-from agents.train import run_dir_for, train
+from agents.stats import wilson_interval
+from agents.sweep.aggregate import GROUP_METRIC, across_seeds
+from agents.sweep.backends import BACKENDS, import_ray, map_calls
+from agents.train import run_dir_for, set_threads, train
 from configs import CONFIG_DIR as _CONFIGS
 
 CONFIG_DIR = _CONFIGS / "agents"
@@ -76,18 +81,25 @@ class Comparison:
     """What :func:`compare` returns.
 
     Attributes:
-        rows: one dict per (setting, policy) with ``setting``, ``policy``, ``budget``,
-            ``command`` and, unless a dry run, ``summary`` (the columns of ``compare.md``).
+        rows: one dict per (setting, policy, training seed) with ``setting``, ``policy``,
+            ``seed`` (None for a baseline), ``budget``, ``command`` and, unless a dry run,
+            ``summary`` (the columns of ``compare.md``).
         evaluations: the evaluations behind the rows, in row order (none in a dry run).
+        across_seeds: the statistics across training seeds (:func:`across_training_seeds`;
+            empty in a dry run).
     """
 
     rows: list[dict[str, Any]]
     evaluations: list[Evaluation]
+    across_seeds: dict[str, Any] = field(default_factory=dict)
 
 
 def agent_label(cfg: AgentConfig) -> str:
-    """``PPO``, ``residual SAC``, ..."""
-    return ("residual " if cfg.is_residual else "") + cfg.algo.upper()
+    """``PPO``, ``residual SAC``, ``residual PPO (zero init)`` (the recipe of
+    ``residual_init: zero``), ...: one label per kind of agent, the group its training seeds
+    and settings are pooled in across seeds."""
+    label = ("residual " if cfg.is_residual else "") + cfg.algo.upper()
+    return label + (" (zero init)" if cfg.residual_init == "zero" else "")
 
 
 def _kwargs_args(kwargs: dict[str, Any]) -> str:
@@ -165,15 +177,15 @@ def agent_run(
     """The run of ``cfg`` that :func:`compare` reports: the latest finished run of it in
     ``log_dir``; else its latest interrupted run with the same config, resumed; else a new
     run, trained (``train_missing``; else ``FileNotFoundError``)."""
-    base = run_dir_for(cfg, log_dir).name
-    finished = latest_run(log_dir, base, FINISHED)
+    finished = finished_run(cfg, log_dir)
     if finished is not None:
         return finished
     if not train_missing:
         raise FileNotFoundError(
-            f"no finished run of {cfg.name} in {log_dir} (run: roughwalk train "
-            f"{_display(cfg.path)} --log-dir {log_dir})"
+            f"no finished run of {cfg.name} (seed {cfg.seed}) in {log_dir} (run: roughwalk "
+            f"train {_display(cfg.path)} --seed {cfg.seed} --log-dir {log_dir})"
         )
+    base = run_dir_for(cfg, log_dir).name
     interrupted = latest_run(log_dir, base, INTERRUPTED)
     if interrupted is not None and _same_config(interrupted, cfg):
         stops = read_manifest(interrupted).get("interruptions") or [{}]
@@ -182,6 +194,48 @@ def agent_run(
             print(f"resuming the interrupted run {interrupted} from {checkpoint}")
             return train(cfg, log_dir=None, resume=checkpoint, progress_bar=progress, threads=None)
     return train(cfg, log_dir=log_dir, progress_bar=progress, threads=None)
+
+
+def finished_run(cfg: AgentConfig, log_dir: Path) -> Path | None:
+    """The latest finished run of ``cfg`` (its config name and seed) in ``log_dir``, or None."""
+    return latest_run(log_dir, run_dir_for(cfg, log_dir).name, FINISHED)
+
+
+def _train_job(job: tuple[AgentConfig, Path, bool]) -> str:
+    """One training of :func:`compare` (a Ray task, or a call in this process): the run
+    folder of ``agent_run(cfg, log_dir, progress=progress)``, on one torch thread."""
+    cfg, log_dir, progress = job
+    set_threads(1)
+    return str(agent_run(cfg, log_dir, True, progress))
+
+
+def _evaluate_job(job: tuple[str, Setting, int, int, bool]) -> Evaluation:
+    """One row's evaluation of :func:`compare` (a Ray task, or a call in this process)."""
+    policy, s, episodes, seed, progress = job
+    if policy not in BASELINE_ROWS:
+        set_threads(1)
+    return evaluate(policy, s.env_id, episodes, seed, s.kwargs, progress=progress)
+
+
+def seed_configs(cfg: AgentConfig, seeds: Sequence[int] | None) -> list[AgentConfig]:
+    """``cfg`` at each training seed of ``seeds`` (None: its own seed only).
+
+    Raises:
+        ConfigError: a seed out of the config's range (the message names it).
+    """
+    if seeds is None:
+        return [cfg]
+    return [cfg.with_seed(s) for s in seeds]
+
+
+def _check_seeds(seeds: Sequence[int] | None) -> None:
+    if seeds is None:
+        return
+    bad = [s for s in seeds if isinstance(s, bool) or not isinstance(s, int) or s < 0]
+    if not seeds or bad:
+        raise ValueError(f"--seeds: training seeds must be integers >= 0, got {list(seeds)!r}")
+    if len(set(seeds)) != len(seeds):
+        raise ValueError(f"--seeds: repeated training seed in {list(seeds)!r}")
 
 
 #: the files a comparison writes to its output folder
@@ -202,12 +256,21 @@ def compare(
     dry_run: bool = False,
     progress: bool = True,
     overwrite: bool = False,
+    seeds: Sequence[int] | None = None,
+    backend: str = "serial",
+    workers: int | None = None,
+    address: str | None = None,
 ) -> Comparison:
     """Run the comparison; returns its rows and evaluations (see :class:`Comparison`).
 
+    The trainings run first, all of them as independent jobs (Ray tasks with ``backend="ray"``:
+    a cluster trains every config and seed at once), then the evaluations, also as jobs. The
+    results do not depend on the backend or the number of workers.
+
     Args:
         config_dir: folder of the agent configs.
-        log_dir: folder of the training runs (one per config, see ``agents.train``).
+        log_dir: folder of the training runs (one per config and seed, see ``agents.train``;
+            on a cluster it must be a folder every node reads and writes).
         out: folder of ``compare.json``, ``compare.csv`` and ``compare.md``.
         episodes: evaluation episodes per row.
         seed: user seed of the held-out test courses (as :func:`agents.evaluate.evaluate`).
@@ -215,12 +278,17 @@ def compare(
         baselines: the baseline rows.
         settings: the terrain settings.
         train_missing: train the agents without a finished run (else raise
-            ``FileNotFoundError``).
+            ``FileNotFoundError``, before anything is trained or evaluated).
         hyperparams: hyperparameters overriding those of every config.
         dry_run: list the rows and their commands only; train, evaluate and write nothing.
-        progress: show progress bars.
+        progress: show progress bars (serial backend).
         overwrite: replace the outputs of an earlier comparison in ``out`` (else that is an
             error).
+        seeds: training seeds of every agent (None: each config's own seed); one row per agent
+            and seed, and the statistics across seeds (:func:`across_training_seeds`).
+        backend: ``serial`` (this process) or ``ray`` (see :mod:`agents.sweep.backends`).
+        workers: Ray: CPUs of a local instance (default: all cores), >= 1.
+        address: Ray: a cluster's address (default: a local instance).
 
     Raises:
         ConfigError, ValueError: bad arguments or configs, an output or log folder that cannot
@@ -230,50 +298,126 @@ def compare(
     for name, value, low in (("--episodes", episodes, 1), ("--seed", seed, 0)):
         if isinstance(value, bool) or not isinstance(value, int) or value < low:
             raise ValueError(f"{name}: must be an integer >= {low}, got {value!r}")
+    _check_seeds(seeds)
+    if backend not in BACKENDS:
+        raise ValueError(f"--backend: unknown backend {backend!r}; allowed: {', '.join(BACKENDS)}")
+    if workers is not None and (isinstance(workers, bool) or not isinstance(workers, int)):
+        raise ValueError(f"--workers: must be an integer >= 1, got {workers!r}")
+    if workers is not None and workers < 1:
+        raise ValueError(f"--workers: must be an integer >= 1, got {workers!r}")
+    if backend == "ray" and not dry_run:
+        import_ray()
     configs = load_agent_configs(Path(config_dir), only, hyperparams)
+    log_dir = Path(log_dir)
+    # from scratch first, then residual; each at every training seed
+    plan = [
+        (
+            s,
+            [
+                c
+                for cfg in sorted(matching, key=lambda c: (c.is_residual, c.algo))
+                for c in seed_configs(cfg, seeds)
+            ],
+        )
+        for s in settings
+        for matching in [[c for c in configs if s.matches(c)]]
+    ]
     if not dry_run:
         check_writable(out, "--out")
         check_writable(log_dir, "--log-dir")
         refuse_earlier_outputs(out, OUTPUTS, overwrite, "comparison")
+    runs: dict[tuple[str, int], Path] = {}
+    jobs: dict[tuple[str, int], AgentConfig] = {}
+    for _, agents in plan:
+        for cfg in agents:
+            key = (cfg.name, cfg.seed)
+            done = finished_run(cfg, log_dir)
+            if done is not None:
+                runs[key] = done
+            elif dry_run:
+                runs[key] = run_dir_for(cfg, log_dir)
+            elif not train_missing:
+                agent_run(cfg, log_dir, train_missing=False)  # raises, naming the run
+            else:
+                jobs[key] = cfg
+    if jobs:
+        serial_progress = progress and backend == "serial"
+        trained = map_calls(
+            _train_job,
+            [(cfg, log_dir, serial_progress) for cfg in jobs.values()],
+            backend,
+            workers,
+            address,
+        )
+        runs.update(zip(jobs, (Path(p) for p in trained)))
     rows: list[dict[str, Any]] = []
-    evaluations: list[Evaluation] = []
-    for s in settings:
+    calls: list[tuple[str, Setting, int, int, bool]] = []
+    for s, agents in plan:
         for name in baselines:
             cmd = evaluate_command(name, s, episodes, seed)
-            row = {"setting": s.name, "policy": name, "budget": "-", "command": cmd}
-            if not dry_run:
-                ev = evaluate(name, s.env_id, episodes, seed, s.kwargs, progress=progress)
-                evaluations.append(ev)
-                row["summary"] = ev.summary
-            rows.append(row)
-        agents = sorted((c for c in configs if s.matches(c)), key=lambda c: (c.is_residual, c.algo))
-        for cfg in agents:  # from scratch first, then residual
-            train_cmd = f"roughwalk train {_display(cfg.path)} --log-dir {log_dir}"
-            if dry_run:
-                base = run_dir_for(cfg, log_dir)
-                run_dir = latest_run(log_dir, base.name, FINISHED) or base
-            else:
-                run_dir = agent_run(cfg, Path(log_dir), train_missing, progress)
+            rows.append(
+                {"setting": s.name, "policy": name, "seed": None, "budget": "-", "command": cmd}
+            )
+            calls.append((name, s, episodes, seed, progress and backend == "serial"))
+        kinds = Counter(agent_label(c) for c in {c.name: c for c in agents}.values())
+        for cfg in agents:
+            label = agent_label(cfg)
+            if kinds[label] > 1:  # two configs of one kind on a setting: not one agent's seeds
+                label = f"{label} [{cfg.name}]"
+            run_dir = runs[(cfg.name, cfg.seed)]
             model = chosen_model(run_dir)
+            train_cmd = (
+                f"roughwalk train {_display(cfg.path)} --seed {cfg.seed} --log-dir {log_dir}"
+            )
             cmd = f"{train_cmd} && " + evaluate_command(str(model), s, episodes, seed)
-            row = {"setting": s.name, "policy": agent_label(cfg), "command": cmd}
-            if not dry_run:
-                ev = evaluate(str(model), s.env_id, episodes, seed, s.kwargs, progress=progress)
-                evaluations.append(ev)
-                row["summary"] = ev.summary
-            row["budget"] = budget(cfg, run_dir)
-            rows.append(row)
-    if not dry_run:
-        out = Path(out)
-        out.mkdir(parents=True, exist_ok=True)
-        atomic_write_text(
-            out / "compare.json",
-            json.dumps({"rows": rows, "evaluations": [e.to_dict() for e in evaluations]}, indent=2)
-            + "\n",
-        )
-        atomic_write(out / "compare.csv", lambda tmp: write_csv(evaluations, tmp))
-        atomic_write_text(out / "compare.md", markdown_table(rows))
-    return Comparison(rows, evaluations)
+            rows.append(
+                {
+                    "setting": s.name,
+                    "policy": label,
+                    "seed": cfg.seed,
+                    "budget": budget(cfg, run_dir),
+                    "command": cmd,
+                }
+            )
+            calls.append((str(model), s, episodes, seed, progress and backend == "serial"))
+    if dry_run:
+        return Comparison(rows, [])
+    evaluations = map_calls(_evaluate_job, calls, backend, workers, address)
+    for row, ev in zip(rows, evaluations):
+        row["summary"] = ev.summary
+    seeds_stats = across_training_seeds(rows)
+    out = Path(out)
+    out.mkdir(parents=True, exist_ok=True)
+    data = {
+        "rows": rows,
+        "across_seeds": seeds_stats,
+        "evaluations": [e.to_dict() for e in evaluations],
+    }
+    atomic_write_text(out / "compare.json", json.dumps(data, indent=2) + "\n")
+    atomic_write(out / "compare.csv", lambda tmp: write_csv(evaluations, tmp))
+    atomic_write_text(out / "compare.md", markdown_table(rows, seeds_stats))
+    return Comparison(rows, list(evaluations), seeds_stats)
+
+
+def across_training_seeds(rows: Sequence[dict[str, Any]]) -> dict[str, Any]:
+    """The success rates of the ``rows`` across training seeds, in the manner of ``rliable``
+    (:func:`agents.sweep.aggregate.across_seeds`): per policy (an agent's seeds, or a baseline
+    as a group of one run) the IQM of the runs' success rates over the settings with a
+    stratified-bootstrap interval, and the probability that a run of one policy walks more
+    courses than a run of another, averaged over the settings both ran on."""
+    cells = [
+        {
+            "group": r["policy"],
+            "policy": f"{r['policy']} s{r['seed']}" if r["seed"] is not None else r["policy"],
+            "cell": f"{r['policy']}/{r['setting']}",
+            GROUP_METRIC: r["summary"][GROUP_METRIC],
+        }
+        for r in rows
+        if r.get("summary") is not None
+    ]
+    return (
+        across_seeds(cells) if cells else {"metric": GROUP_METRIC, "groups": [], "improvement": []}
+    )
 
 
 def _cell(summary: dict[str, Any] | None, key: str, spec: str, scale: float = 1.0) -> str:
@@ -282,22 +426,67 @@ def _cell(summary: dict[str, Any] | None, key: str, spec: str, scale: float = 1.
     return format(summary[key] * scale, spec)
 
 
-def markdown_table(rows: list[dict[str, Any]]) -> str:
+def markdown_table(rows: list[dict[str, Any]], seeds_stats: dict[str, Any] | None = None) -> str:
     """The README table (markdown) of the comparison's ``rows``: one line per (setting,
-    policy)."""
+    policy, training seed), the success rate with its Wilson 95 % interval; then, with
+    ``seeds_stats`` (:func:`across_training_seeds`), the IQM of every policy across its training
+    seeds and the probability of improvement of each agent over each baseline."""
     lines = [
-        "| terrain | policy | success [%] | footsteps | distance [m] | speed [m/s] | CoT "
-        "| failures | training budget | command |",
-        "|---|---|---:|---:|---:|---:|---:|---|---|---|",
+        "| terrain | policy | seed | success [%] (95 % CI) | footsteps | distance [m] "
+        "| speed [m/s] | CoT | failures | training budget | command |",
+        "|---|---|---:|---:|---:|---:|---:|---:|---|---|---|",
     ]
     for r in rows:
         s = r.get("summary")
         reasons = (s or {}).get("failure_reasons") or {}
         failures = ", ".join(f"{k} {v}" for k, v in sorted(reasons.items())) or "-"
+        seed = "-" if r.get("seed") is None else str(r["seed"])
         lines.append(
-            f"| {r['setting']} | {r['policy']} | {_cell(s, 'success_rate', '.0f', 100)} "
+            f"| {r['setting']} | {r['policy']} | {seed} | {_success(s)} "
             f"| {_cell(s, 'mean_footsteps', '.1f')} | {_cell(s, 'mean_distance', '.2f')} "
             f"| {_cell(s, 'mean_speed', '.3f')} | {_cell(s, 'cost_of_transport', '.3f')} "
             f"| {failures if s else '-'} | {r['budget']} | `{r['command']}` |"
         )
+    if seeds_stats and seeds_stats.get("groups"):
+        lines += [
+            "",
+            "Across training seeds (success rate of each run; IQM over runs and settings, "
+            "stratified bootstrap 95 %):",
+            "",
+            "| policy | settings | runs per setting | IQM success [%] (95 % CI) |",
+            "|---|---:|---:|---|",
+        ]
+        for g in seeds_stats["groups"]:
+            lo, hi = g["iqm_ci"]
+            lines.append(
+                f"| {g['group']} | {g['tasks']} | {g['runs']} "
+                f"| {100 * g['iqm']:.0f} ({100 * lo:.0f}-{100 * hi:.0f}) |"
+            )
+        pairs = [
+            p
+            for p in seeds_stats["improvement"]
+            if (p["x"] in BASELINE_ROWS) != (p["y"] in BASELINE_ROWS)
+        ]
+        if pairs:
+            lines += [
+                "",
+                "| agent | baseline | P(agent walks more courses) (95 % CI) |",
+                "|---|---|---|",
+            ]
+            for p in pairs:
+                agent, base, point = p["x"], p["y"], p["p_x_better"]
+                lo, hi = p["p_x_better_ci"]
+                if agent in BASELINE_ROWS:  # stored as P(baseline better)
+                    agent, base, point, lo, hi = base, agent, 1 - point, 1 - hi, 1 - lo
+                lines.append(f"| {agent} | {base} | {point:.2f} ({lo:.2f}-{hi:.2f}) |")
     return "\n".join(lines) + "\n"
+
+
+def _success(summary: dict[str, Any] | None) -> str:
+    """``rate (low-high)`` [%] with the Wilson 95 % interval, or ``-``."""
+    if summary is None:
+        return "-"
+    n = int(summary["episodes"])
+    k = round(summary["success_rate"] * n)
+    lo, hi = wilson_interval(k, n)
+    return f"{100 * k / n:.0f} ({100 * lo:.0f}-{100 * hi:.0f})"

@@ -39,6 +39,7 @@ which ignores the ``run`` section.
 from __future__ import annotations
 
 import copy
+import dataclasses
 import importlib
 import inspect
 from collections.abc import Callable, Mapping
@@ -199,6 +200,19 @@ class AgentConfig:
     def name(self) -> str:
         """Short name of the run (the file's stem)."""
         return self.path.stem
+
+    def with_seed(self, seed: int) -> AgentConfig:
+        """The same config with training seed ``seed``.
+
+        Raises:
+            ConfigError: ``seed`` out of range (training envs ``seed + i`` stay below
+                ``TRAIN_SEED_LIMIT``).
+        """
+        if isinstance(seed, bool) or not isinstance(seed, (int, np.integer)):
+            raise ConfigError(f"{self.path}: run.seed = {seed!r}; allowed: an integer")
+        n_envs = int(self.hyperparams.get("n_envs", 1))
+        _check_range(self.path, "run.seed", int(seed), 0, TRAIN_SEED_LIMIT - n_envs)
+        return dataclasses.replace(self, seed=int(seed))
 
     @property
     def algo_class(self) -> type:

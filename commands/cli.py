@@ -225,6 +225,29 @@ def output_dir(text: str) -> Path:
         raise argparse.ArgumentTypeError(str(exc)) from None
 
 
+def add_backend_arguments(parser: argparse.ArgumentParser, what: str) -> None:
+    """``--backend``, ``--address`` and ``--workers``: where ``what`` (``the episodes``, say)
+    run (:mod:`agents.sweep.backends`)."""
+    from agents.sweep.backends import BACKENDS
+
+    parser.add_argument(
+        "--backend",
+        choices=BACKENDS,
+        default="serial",
+        help=f"where {what} run: this process, or Ray tasks (the sweep extra)",
+    )
+    parser.add_argument(
+        "--address",
+        help="Ray: the address of an existing cluster (ray://HOST:10001, HOST:6379 or auto; "
+        "default: a local instance)",
+    )
+    parser.add_argument(
+        "--workers",
+        type=int_range(1),
+        help=f"Ray: CPUs of the local instance, {what} run at once (default: all cores)",
+    )
+
+
 # ---------------------------------------------------------------- numba's first compilation
 COMPILING = "compiling the simulator and controller kernels (first run only, about a minute)..."
 # modules holding the numba kernels of the simulator and env, and of the controller

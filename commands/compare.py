@@ -4,7 +4,11 @@ For each terrain setting (flat, the paper's stairs, rough blocks at two difficul
 evaluates the baselines (passive, PD, reference controller) and, for every config in
 ``configs/agents`` whose env matches the setting, trains the agent and evaluates it (the best
 model of the periodic evaluations on the validation courses, else the final one), all on the
-same held-out test seeds. A finished run of the config in ``--log-dir`` is reused (the latest
+same held-out test seeds; with ``--seeds`` every agent is trained at each training seed and the
+table adds the IQM across seeds and the probability of improvement over each baseline. With
+``--backend ray`` the trainings (then the evaluations) run as Ray tasks, on a local instance of
+``--workers`` CPUs or on the cluster at ``--address`` (whose nodes share ``--log-dir``). A
+finished run of the config in ``--log-dir`` is reused (the latest
 one); an interrupted run of the same config is resumed; otherwise a new run is trained. It
 writes ``compare.json`` (every episode), ``compare.csv`` and ``compare.md`` (the summary table
 with the command reproducing each row and the env steps each agent was really trained for) to
@@ -20,6 +24,7 @@ from pathlib import Path
 from agents.compare import CONFIG_DIR, SETTINGS, compare, markdown_table
 from agents.config import TEST_SEED
 from agents.train import set_threads
+from commands.cli import add_backend_arguments, int_range
 from commands.evaluate import print_table
 
 
@@ -60,6 +65,16 @@ def configure(parser: argparse.ArgumentParser) -> None:
     parser.add_argument(
         "--dry-run", action="store_true", help="print the table of commands, run nothing"
     )
+    parser.add_argument(
+        "--seeds",
+        nargs="+",
+        type=int_range(0),
+        metavar="SEED",
+        help="training seeds of every agent: one run each (RUNS/<config>_s<seed>), one row "
+        "each, and the IQM and probability of improvement across them (default: each "
+        "config's own seed)",
+    )
+    add_backend_arguments(parser, "the trainings and evaluations")
     parser.add_argument("--no-progress", action="store_true", help="no progress bars")
     parser.add_argument("--threads", type=int, default=1, help="torch threads (default 1)")
 
@@ -85,6 +100,10 @@ def run(args: argparse.Namespace) -> int:
             dry_run=args.dry_run,
             progress=not args.no_progress,
             overwrite=args.overwrite,
+            seeds=args.seeds,
+            backend=args.backend,
+            workers=args.workers,
+            address=args.address,
         )
     except KeyboardInterrupt:
         return 130
@@ -93,5 +112,12 @@ def run(args: argparse.Namespace) -> int:
     else:
         title = f"held-out seeds from {args.seed}, {args.episodes} episodes"
         print_table(result.evaluations, title=title)
+        for g in result.across_seeds.get("groups", []):
+            if g["runs"] > 1:
+                lo, hi = g["iqm_ci"]
+                print(
+                    f"{g['group']}: IQM success {100 * g['iqm']:.0f} % ({100 * lo:.0f}-"
+                    f"{100 * hi:.0f} %) over {g['runs']} training seeds x {g['tasks']} settings"
+                )
         print(f"results in {args.out}/compare.md, compare.json, compare.csv")
     return 0

@@ -38,10 +38,11 @@ from rich.console import Console
 from rich.markup import escape
 from rich.table import Table
 
-from agents.sweep import BACKENDS, load_spec, run_sweep
+from agents.sweep import load_spec, run_sweep
 from commands.cli import (
     CONTROLLER_KERNELS,
     SIMULATOR_KERNELS,
+    add_backend_arguments,
     announce_compilation,
     int_range,
     output_dir,
@@ -52,19 +53,7 @@ def configure(parser: argparse.ArgumentParser) -> None:
     """Add the arguments of ``roughwalk sweep`` to ``parser``."""
     parser.add_argument("spec", type=Path, metavar="SPEC.yaml", help="the sweep spec")
     parser.add_argument("--out", type=output_dir, required=True, help="results folder")
-    parser.add_argument(
-        "--backend", choices=BACKENDS, default="serial", help="where the episodes run"
-    )
-    parser.add_argument(
-        "--address",
-        help="Ray: the address of an existing cluster (ray://HOST:10001, HOST:6379 or auto; "
-        "default: a local instance)",
-    )
-    parser.add_argument(
-        "--workers",
-        type=int_range(1),
-        help="Ray: CPUs of the local instance, episodes run at once (default: all cores)",
-    )
+    add_backend_arguments(parser, "the episodes")
     parser.add_argument(
         "--chunk",
         type=int_range(1),

@@ -1,5 +1,6 @@
-"""Where a sweep's tasks run: in this process (``serial``) or as Ray tasks (``ray``), on a
-local Ray instance started for the sweep or on an existing cluster.
+"""Where a sweep's tasks (and a comparison's trainings and evaluations) run: in this process
+(``serial``) or as Ray tasks (``ray``), on a local Ray instance started for the run or on an
+existing cluster.
 
 Both call ``on_records(records)`` in this process as work finishes: the serial backend after
 every episode, the Ray backend after every task (in the order tasks finish). The records do not
@@ -74,16 +75,85 @@ def init_ray(workers: int | None = None, address: str | None = None) -> bool:
     return True
 
 
+#: how long a stopped run of calls waits for its cancelled Ray tasks to wind down (a training
+#: saves a checkpoint and marks its run interrupted) [s]
+CANCEL_GRACE = 120.0
+
+
+def map_calls(
+    fn: Callable[..., Any],
+    items: Sequence[Any],
+    backend: str = "serial",
+    workers: int | None = None,
+    address: str | None = None,
+    on_result: Callable[[int, Any], None] | None = None,
+) -> list[Any]:
+    """``[fn(item) for item in items]``, in this process (``serial``) or as Ray tasks of one CPU
+    each on a local instance or a cluster (``ray``, see :func:`init_ray`; an instance started
+    here is shut down at the end).
+
+    If a call fails or the caller is interrupted (Ctrl-C), the Ray tasks still running are
+    cancelled with a ``KeyboardInterrupt`` inside them (what Ctrl-C does in the serial
+    backend), given :data:`CANCEL_GRACE` seconds to wind down, and the exception is raised.
+
+    Args:
+        fn: a module-level function (Ray pickles it by reference); on a cluster every node
+            needs this package installed (the same version).
+        items: its arguments, one call each.
+        backend: ``serial`` or ``ray``.
+        workers: Ray: CPUs of a local instance (default: all cores), >= 1.
+        address: Ray: a cluster's address (default: a local instance).
+        on_result: called in this process as ``on_result(index, result)`` when a call ends (in
+            the order calls end).
+
+    Returns the results in the order of ``items``.
+    """
+    if backend not in BACKENDS:
+        raise ValueError(f"--backend: unknown backend {backend!r}; allowed: {', '.join(BACKENDS)}")
+    results: list[Any] = [None] * len(items)
+    if backend == "serial":
+        for i, item in enumerate(items):
+            results[i] = fn(item)
+            if on_result is not None:
+                on_result(i, results[i])
+        return results
+    ray = import_ray()
+    if not items:
+        return results
+    started = init_ray(workers, address)
+    try:
+        remote = ray.remote(num_cpus=1, max_retries=0)(fn)
+        refs = [remote.remote(item) for item in items]
+        index = {ref: i for i, ref in enumerate(refs)}
+        pending = list(refs)
+        try:
+            while pending:
+                done, pending = ray.wait(pending, num_returns=1)
+                for ref in done:
+                    i = index[ref]
+                    results[i] = ray.get(ref)
+                    if on_result is not None:
+                        on_result(i, results[i])
+        except BaseException:
+            for ref in pending:
+                ray.cancel(ref, force=False)
+            if pending:
+                ray.wait(pending, num_returns=len(pending), timeout=CANCEL_GRACE)
+            raise
+    finally:
+        if started:
+            ray.shutdown()
+    return results
+
+
 def run_ray(
     tasks: Sequence[Task],
     on_records: OnRecords,
     workers: int | None = None,
     address: str | None = None,
 ) -> None:
-    """Run ``tasks`` as Ray tasks (one CPU each) on a local instance or a cluster (see
-    :func:`init_ray`); a Ray instance started here is shut down at the end.
-
-    A cluster's nodes need this package installed (the same version): the tasks import it.
+    """Run ``tasks`` as Ray tasks (:func:`map_calls`), passing each task's records to
+    ``on_records`` as the task finishes.
 
     Args:
         tasks: the tasks.
@@ -91,25 +161,7 @@ def run_ray(
         workers: CPUs of a local instance (default: all cores).
         address: a cluster's address, or None for a local instance.
     """
-    ray = import_ray()
-    if not tasks:
-        return
-    started = init_ray(workers, address)
-    try:
-        remote = ray.remote(num_cpus=1, max_retries=0)(run_task_list)
-        pending = [remote.remote(t) for t in tasks]
-        try:
-            while pending:
-                done, pending = ray.wait(pending, num_returns=1)
-                for ref in done:
-                    on_records(ray.get(ref))
-        except BaseException:
-            for ref in pending:
-                ray.cancel(ref, force=True)
-            raise
-    finally:
-        if started:
-            ray.shutdown()
+    map_calls(run_task_list, tasks, "ray", workers, address, lambda _, records: on_records(records))
 
 
 def run_tasks(

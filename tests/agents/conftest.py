@@ -58,3 +58,14 @@ def trained_ppo_run(tmp_path_factory: pytest.TempPathFactory) -> Path:
     """A tiny PPO run on flat ground (from scratch), trained once per session."""
     cfg = smoke_config(CONFIG_DIR / "ppo_flat.yaml")
     return train(cfg, log_dir=tmp_path_factory.mktemp("runs"), progress_bar=False)
+
+
+@pytest.fixture(scope="module")
+def local_ray():
+    """A local Ray instance with 2 CPUs for the module (the test is skipped without Ray)."""
+    ray = pytest.importorskip("ray")
+    from agents.sweep.backends import init_ray
+
+    assert init_ray(workers=2)
+    yield ray
+    ray.shutdown()

@@ -32,7 +32,7 @@ def test_compare_trains_evaluates_and_writes_the_table(tmp_path: Path):
     assert str(tmp_path / "runs" / "ppo_flat_s0" / "model.zip") in rows[1]["command"]
     assert (tmp_path / "runs" / "ppo_flat_s0" / "model.zip").is_file()
     table = (tmp_path / "results" / "compare.md").read_text()
-    assert "| flat | PPO |" in table and "ppo_flat.yaml --log-dir" in table
+    assert "| flat | PPO |" in table and "ppo_flat.yaml --seed 0 --log-dir" in table
     data = json.loads((tmp_path / "results" / "compare.json").read_text())
     assert len(data["evaluations"]) == 2
     assert all(len(e["episodes"]) == 2 for e in data["evaluations"])
@@ -132,3 +132,66 @@ def test_a_second_comparison_keeps_the_first_unless_told_to_overwrite(tmp_path: 
     monkeypatch.undo()
     compare(**kw, overwrite=True, seed=5)
     assert (tmp_path / "results" / "compare.json").read_bytes() != first["compare.json"]
+
+
+def _compare_seeds(tmp_path: Path, name: str, **kwargs):
+    return compare(
+        log_dir=tmp_path / name / "runs",
+        out=tmp_path / name / "results",
+        episodes=2,
+        only="ppo_flat",
+        baselines=("passive",),
+        settings=SETTINGS[:1],
+        hyperparams=TINY,
+        progress=False,
+        seeds=(0, 3),
+        **kwargs,
+    )
+
+
+def test_compare_trains_every_seed_and_reports_statistics_across_them(tmp_path: Path):
+    result = _compare_seeds(tmp_path, "serial")
+    runs = tmp_path / "serial" / "runs"
+    assert sorted(p.name for p in runs.iterdir()) == ["ppo_flat_s0", "ppo_flat_s3"]
+    assert [(r["policy"], r["seed"]) for r in result.rows] == [
+        ("passive", None),
+        ("PPO", 0),
+        ("PPO", 3),
+    ]
+    assert "ppo_flat.yaml --seed 3 --log-dir" in result.rows[2]["command"]
+    groups = {g["group"]: g for g in result.across_seeds["groups"]}
+    assert groups["PPO"]["runs"] == 2 and groups["passive"]["runs"] == 1
+    rates = [r["summary"]["success_rate"] for r in result.rows[1:]]
+    assert min(rates) <= groups["PPO"]["iqm"] <= max(rates)
+    (pair,) = result.across_seeds["improvement"]
+    assert {pair["x"], pair["y"]} == {"PPO", "passive"}
+    table = (tmp_path / "serial" / "results" / "compare.md").read_text()
+    assert "| flat | PPO | 3 |" in table and "Across training seeds" in table
+    assert "| PPO | passive |" in table
+    data = json.loads((tmp_path / "serial" / "results" / "compare.json").read_text())
+    assert data["across_seeds"] == result.across_seeds
+    # a second comparison reuses both finished runs: nothing is trained again
+    again = compare(
+        log_dir=runs,
+        out=tmp_path / "again",
+        episodes=2,
+        only="ppo_flat",
+        baselines=(),
+        settings=SETTINGS[:1],
+        hyperparams=TINY,
+        progress=False,
+        seeds=(3, 0),
+        train_missing=False,
+    )
+    assert [r["summary"] for r in again.rows] == [r["summary"] for r in result.rows[:0:-1]]
+
+
+def test_compare_on_ray_trains_and_evaluates_to_the_same_results(local_ray, tmp_path: Path):
+    serial = _compare_seeds(tmp_path, "serial")
+    remote = _compare_seeds(tmp_path, "ray", backend="ray")
+    assert sorted(p.name for p in (tmp_path / "ray" / "runs").iterdir()) == [
+        "ppo_flat_s0",
+        "ppo_flat_s3",
+    ]
+    assert [e.episodes for e in remote.evaluations] == [e.episodes for e in serial.evaluations]
+    assert remote.across_seeds == serial.across_seeds

@@ -5,18 +5,34 @@ import pytest
 
 from agents.evaluate import evaluate
 from agents.sweep import read_records, run_sweep, spec_from_dict
-from agents.sweep.backends import init_ray
+from agents.sweep.backends import map_calls
 from agents.sweep.store import EPISODES_FILE
 
-ray = pytest.importorskip("ray")
+pytest.importorskip("ray")
 
 
-@pytest.fixture(scope="module")
-def local_ray():
-    """A local Ray instance with 2 CPUs for the module."""
-    assert init_ray(workers=2)
-    yield ray
-    ray.shutdown()
+def _square_or_fail(x: int) -> int:
+    if x < 0:
+        raise ArithmeticError(f"negative {x}")
+    return x * x
+
+
+@pytest.mark.parametrize("backend", ["serial", "ray"])
+def test_map_calls_returns_results_in_order_and_reports_each(local_ray, backend):
+    seen = []
+    items = [3, 1, 2, 0]
+    out = map_calls(_square_or_fail, items, backend, on_result=lambda i, r: seen.append((i, r)))
+    assert out == [9, 1, 4, 0]
+    assert sorted(seen) == [(0, 9), (1, 1), (2, 4), (3, 0)]
+    assert map_calls(_square_or_fail, [], backend) == []
+
+
+@pytest.mark.parametrize("backend", ["serial", "ray"])
+def test_map_calls_raises_a_failed_call(local_ray, backend):
+    with pytest.raises(ArithmeticError, match="negative -2"):
+        map_calls(_square_or_fail, [1, -2, 3], backend)
+    with pytest.raises(ValueError, match="--backend: unknown backend 'dask'"):
+        map_calls(_square_or_fail, [1], "dask")
 
 
 def test_ray_and_serial_give_identical_records(local_ray, tmp_path):

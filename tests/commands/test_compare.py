@@ -27,6 +27,30 @@ def test_compare_dry_run_lists_every_row(capsys):
     }
 
 
+def test_compare_dry_run_lists_a_row_per_training_seed(capsys):
+    assert main(["compare", "--dry-run", "--terrains", "flat", "--seeds", "0", "1", "2"]) == 0
+    lines = [ln for ln in capsys.readouterr().out.splitlines() if ln.startswith("| flat")]
+    # 3 baselines, then 4 agents x 3 seeds
+    assert len(lines) == 3 + 4 * 3
+    assert [ln.split("|")[3].strip() for ln in lines[3:6]] == ["0", "1", "2"]
+    assert "ppo_flat.yaml --seed 2 --log-dir" in lines[5]
+
+
+def test_two_configs_of_one_kind_on_a_setting_are_not_pooled_as_seeds(tmp_path: Path, capsys):
+    from agents.compare import CONFIG_DIR
+
+    for name in ("ppo_flat", "ppo_flat_b"):
+        (tmp_path / f"{name}.yaml").write_bytes((CONFIG_DIR / "ppo_flat.yaml").read_bytes())
+    (tmp_path / "ppo_residual_rough_hard_zero.yaml").write_bytes(
+        (CONFIG_DIR / "ppo_residual_rough_hard_zero.yaml").read_bytes()
+    )
+    argv = ["compare", "--configs", str(tmp_path), "--terrains", "flat", "rough-hard"]
+    assert main([*argv, "--dry-run"]) == 0
+    labels = [ln.split("|")[2].strip() for ln in capsys.readouterr().out.splitlines()[2:]]
+    assert labels[3:5] == ["PPO [ppo_flat]", "PPO [ppo_flat_b]"]
+    assert labels[-1] == "residual PPO (zero init)"
+
+
 # (arguments after ``compare``, with {tmp} for the test's folder; what the message says)
 COMPARE_ERRORS = [
     (["--configs", "/nonexistent", "--dry-run"], "--configs /nonexistent: no such folder"),
@@ -41,6 +65,8 @@ COMPARE_ERRORS = [
     (["--episodes", "0", "--dry-run"], "--episodes: must be an integer >= 1, got 0"),
     (["--seed", "-1", "--dry-run"], "--seed: must be an integer >= 0, got -1"),
     (["--threads", "0", "--dry-run"], "--threads: must be an integer >= 1, got 0"),
+    (["--seeds", "1", "1", "--dry-run"], "--seeds: repeated training seed in [1, 1]"),
+    (["--seeds", "999999", "--dry-run"], "run.seed = 999999 is out of range; allowed: in [0,"),
     (["--out", "{tmp}/a_file/results"], "--out {tmp}/a_file/results: {tmp}/a_file is not a folder"),
     (
         ["--log-dir", "{tmp}/a_file/runs"],
