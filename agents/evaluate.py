@@ -365,6 +365,7 @@ def make_eval_env(
     planner: dict[str, Any] | None = None,
     controller: dict[str, Any] | None = None,
     observer_eps: float | None = None,
+    identify: int | None = None,
 ) -> tuple[gym.Env, Policy, str, dict[str, Any]]:
     """The env (with the agent's wrappers) and the policy for ``policy_spec``.
 
@@ -390,6 +391,9 @@ def make_eval_env(
             ``controller_mode``'s).
         observer_eps: for the ``pd`` and ``reference`` baselines, the high-gain observer's time
             constant [s] (> 0; None: the policy's default, 0.04 s; the paper's: 0.02 s).
+        identify: for the ``pd`` and ``reference`` baselines, identify the swing dynamics
+            online after each of the first ``identify`` footsteps (an integer >= 0; 0: off;
+            None: the policy's default, 6; see :class:`controllers.ReferencePolicy`).
 
     Returns:
         ``(env, policy, env_id, env_kwargs)``, with the env id and keyword arguments used.
@@ -400,6 +404,7 @@ def make_eval_env(
         "planner": planner,
         "controller": controller,
         "observer_eps": observer_eps,
+        "identify": identify,
     }
     for name, value in settings.items():
         if value is not None and policy_spec not in CONTROLLED_BASELINES:
@@ -423,6 +428,10 @@ def make_eval_env(
         if not eps > 0:
             raise ValueError(f"observer_eps = {observer_eps!r}; allowed: a number > 0 [s]")
         options["eps"] = eps
+    if identify is not None:
+        if isinstance(identify, bool) or not isinstance(identify, int) or identify < 0:
+            raise ValueError(f"identify = {identify!r}; allowed: an integer >= 0 (footsteps)")
+        options["identify"] = identify
     trained = None
     if policy_spec not in BASELINES:
         trained = load_trained(policy_spec, vecnormalize=vecnormalize, algo=algo)
@@ -483,6 +492,7 @@ def evaluate(
     planner: dict[str, Any] | None = None,
     controller: dict[str, Any] | None = None,
     observer_eps: float | None = None,
+    identify: int | None = None,
 ) -> Evaluation:
     """Evaluate a baseline (``passive``, ``pd``, ``reference``) or a trained model (path).
 
@@ -495,10 +505,10 @@ def evaluate(
         vecnormalize: a trained model's ``VecNormalize`` statistics (default: beside it).
         progress: show a progress bar.
         algo: a trained model's algorithm (default: from its run or the file).
-        controller_mode, plan_steps, perception, planner, controller, observer_eps: the ``pd``
-            and ``reference`` baselines' controller mode, fixed-plan length, perception,
-            planner and controller settings and observer time constant (see
-            :func:`make_eval_env`).
+        controller_mode, plan_steps, perception, planner, controller, observer_eps, identify:
+            the ``pd`` and ``reference`` baselines' controller mode, fixed-plan length,
+            perception, planner and controller settings, observer time constant and online
+            identification (see :func:`make_eval_env`).
     """
     seeds = eval_seeds(seed, episodes)
     env, policy, env_id, env_kwargs = make_eval_env(
@@ -513,6 +523,7 @@ def evaluate(
         planner,
         controller,
         observer_eps,
+        identify,
     )
     mass, g, _ = _robot(env)
     iterator: Any = seeds

@@ -276,6 +276,14 @@ def configure(parser: argparse.ArgumentParser) -> None:
         "(default 0.04; the paper's: 0.02)",
     )
     parser.add_argument(
+        "--identify",
+        type=int_range(0),
+        metavar="N",
+        help=f"the {' and '.join(CONTROLLED_BASELINES)} policies identify the swing dynamics "
+        "online after each of the first N footsteps and switch to the identified model when "
+        "the data reject the nominal one (default 6; 0: the nominal model throughout)",
+    )
+    parser.add_argument(
         "--json", type=output_file, metavar="FILE", help="write summary and episodes as JSON"
     )
     parser.add_argument(
@@ -363,6 +371,7 @@ def run(args: argparse.Namespace) -> int:
             planner=dict(args.planner) if args.planner else None,
             controller=dict(args.controller) if args.controller else None,
             observer_eps=args.observer_eps,
+            identify=args.identify,
         )
     except ValueError as exc:
         message = str(exc)

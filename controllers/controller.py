@@ -324,6 +324,17 @@ class TransverseController:
         self._theta_start = math.nan  # theta where the current step's tracking began
         self._outside = 0  # consecutive ticks outside the plan's tube
 
+    def set_robot(self, robot: RobotParams) -> None:
+        """Plan and track with the model ``robot`` from the next (re)plan on (an identified
+        one, say): a planner with the same settings for it; the current step's gains stay
+        until then."""
+        robot = as_params(robot)
+        self.planner = GaitPlanner(robot, self.planner.config)
+        self.robot = robot
+        self.P = robot.vector()
+        self._torque_gain = float(model.input_gain(self.P))
+        self._relaxed.clear()
+
     # ------------------------------------------------------------------ planning
     def reset(
         self,

@@ -34,6 +34,7 @@ import gymnasium as gym
 import numpy as np
 
 from envs.physics.encoders import encoders_to_q, stance_from_contacts
+from envs.physics.params import RobotParams
 from envs.physics.terrain import Terrain
 
 from .localisation import LocalisationResult, ScanLocaliser
@@ -92,6 +93,8 @@ class SensorStateEstimator:
         corrections: per touchdown, the localisation's :class:`LocalisationResult` (empty
             without ``localise``).
         map: the :class:`ScanMap` being built (``mapping``), else None.
+        angle_sigma: standard deviation of a decoded angle [rad] (encoder noise and
+            quantisation).
     """
 
     def __init__(
@@ -141,6 +144,9 @@ class SensorStateEstimator:
                 "localise and mapping cannot be combined yet: a map built from the scans is in "
                 "the frame of the dead-reckoned foot (choose one)"
             )
+        # a measured angle's error [rad]: encoder noise and quantisation; q2 reads two encoders
+        enc = (sensors.encoder_noise, sensors.encoder_resolution) if sensors else (1e-3, 0.0)
+        self.angle_sigma = max(math.sqrt(2.0) * math.hypot(enc[0], enc[1] / math.sqrt(12)), 1e-4)
         self.localiser: ScanLocaliser | None = None
         self.map: ScanMap | None = None
         if self.localise:
@@ -175,6 +181,21 @@ class SensorStateEstimator:
     def x(self) -> np.ndarray:
         """The estimate ``[q1, q2, q1d, q2d]`` [rad, rad/s] (the observer's, updated in place)."""
         return self.observer.x
+
+    def set_robot(self, robot: RobotParams) -> None:
+        """Estimate with the model ``robot`` from now on (an identified one, say), keeping the
+        estimate. With localisation, the learnt drift is re-referred to the new leg length
+        (dead reckoning with the new ``l`` already moves the foot by the ratio of the two)."""
+        obs = self.observer
+        new = HighGainObserver(robot, self.dt, obs.eps)
+        new.x[:] = obs.x
+        new.q_last = obs.q_last.copy()
+        if self.localiser is not None:
+            ratio = robot.l / self.robot.l
+            self.localiser.drift = (1.0 + self.localiser.drift) / ratio - 1.0
+        self.observer = new
+        self.robot = robot
+        self.P = robot.vector()
 
     def decode(self, obs: Any) -> tuple[np.ndarray, int]:
         """Measured ``q`` [rad] and the stance leg from one sensor observation.

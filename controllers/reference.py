@@ -37,10 +37,20 @@ from envs.physics.actuator import action_from_input, input_from_action
 
 from .controller import ControllerConfig, PDController, TransverseController
 from .estimator import IMPACT, START, SensorStateEstimator
+from .identification import SwingIdentifier, robot_from_coefficients
 from .observer import DEFAULT_EPS
 from .planner import GaitPlanner, PlannerConfig
 
 __all__ = ["PDPolicy", "ReferencePolicy", "make_reference_policy"]
+
+#: footsteps after which the reference policy identifies the swing dynamics by default
+DEFAULT_IDENTIFY = 6
+#: the leg length is re-identified when the localisation's drift is this many of its standard
+#: deviations from zero
+DRIFT_Z = 1.5
+#: an identified robot replaces the one in use when a coefficient or the leg length changes by
+#: more than this fraction (a new planner computes its periodic gait, about 0.1-0.5 s)
+MODEL_CHANGE = 0.01
 
 
 class ReferencePolicy:
@@ -68,6 +78,14 @@ class ReferencePolicy:
             the true course (:class:`SensorStateEstimator`).
         odometry_error: relative standard deviation of a dead-reckoned step length (the
             localisation's process noise), >= 0.
+        identify: identify the swing dynamics online (:mod:`controllers.identification`):
+            after each of the first ``identify`` footsteps the coefficients are fitted to the
+            stances walked so far, and the estimator, planner and feedback switch to the
+            nearest robot with them (its leg length from the localisation's drift when
+            ``localise`` is on, else the nominal one) when the data reject the model in use;
+            0: off (the nominal model throughout). Default :data:`DEFAULT_IDENTIFY`. The fits
+            are in :attr:`diagnostics` (``"identified"``: footstep, relative coefficient
+            changes, the leg length switched to or None).
         controller_kwargs: passed to the controller class (``kp``, ``kd`` for :class:`PDPolicy`).
     """
 
@@ -85,12 +103,22 @@ class ReferencePolicy:
         localise: bool | None = None,
         mapping: bool = False,
         odometry_error: float = 0.02,
+        identify: int = DEFAULT_IDENTIFY,
         **controller_kwargs: Any,
     ):
         est = self.estimator = SensorStateEstimator(
             env, eps, initial_velocity, localise, mapping, odometry_error
         )
         self.robot, self.u_max = est.robot, est.u_max
+        self.nominal_robot = self.robot
+        if isinstance(identify, bool) or not isinstance(identify, (int, np.integer)):
+            raise ValueError(f"identify = {identify!r}; allowed: an integer >= 0 (footsteps)")
+        if identify < 0:
+            raise ValueError(f"identify = {identify!r}; allowed: an integer >= 0 (footsteps)")
+        self.identify = int(identify)
+        self.identifier: SwingIdentifier | None = None
+        if self.identify:
+            self.identifier = SwingIdentifier(self.robot, est.dt, est.angle_sigma)
         if config is None:
             config = ControllerConfig()
         # the episode's course is known at its first tick: the controller gets it at reset
@@ -105,7 +133,15 @@ class ReferencePolicy:
     # ------------------------------------------------------------------ episode
     def reset(self) -> None:
         """Forget the episode (call after ``env.reset``); the next call starts a new one."""
+        if self.robot is not self.nominal_robot:  # the last episode's identified robot
+            self.estimator.set_robot(self.nominal_robot)
+            self.controller.set_robot(self.nominal_robot)
+            self.robot = self.nominal_robot
         self.estimator.reset()
+        if self.identifier is not None:
+            self.identifier.reset()
+        self._stance_q: list[np.ndarray] = []
+        self._stance_u: list[float] = []
         self._u = 0.0
         self._settled = False
         self._dead = False
@@ -114,6 +150,7 @@ class ReferencePolicy:
             "fallbacks": [],
             "touchdowns_located": 0,
             "touchdowns_guessed": 0,
+            "identified": [],
             "error": None,
         }
         self.history: dict[str, list] = {
@@ -169,8 +206,15 @@ class ReferencePolicy:
 
     def _tick(self, q: np.ndarray, leg: int) -> float:
         est = self.estimator
+        if self._stance_q:
+            self._stance_u.append(self._u)  # the input over the period that just ended
         event = est.update(q, leg, self._u)
         x = est.x
+        if self.identifier is not None:
+            if event == IMPACT:
+                self._identify()
+                self._stance_q, self._stance_u = [], []
+            self._stance_q.append(q.copy())
         if event == START:
             self.controller.reset(
                 x[:2].copy(),
@@ -207,6 +251,39 @@ class ReferencePolicy:
             h["stance_leg"].append(est.stance_leg)
             h["nominal"].append(self.controller.nominal(x[1]))
         return u
+
+    def _identify(self) -> None:
+        """A stance ended: fit the swing dynamics to the stances so far and switch the model
+        (the first :attr:`identify` footsteps)."""
+        n = self.diagnostics["footsteps"] + 1  # the footstep that just ended the stance
+        if n > self.identify or len(self._stance_q) != len(self._stance_u):
+            return
+        est, l = self.estimator, self.robot.l  # noqa: E741
+        loc = est.localiser
+        if loc is not None and abs(loc.drift) > DRIFT_Z * math.sqrt(loc.cov[1, 1]):
+            l = self.robot.l * (1.0 + loc.drift)  # noqa: E741  (a drift the scans are sure of)
+        ident = self.identifier
+        ident.leg_length = l
+        ident.add_stance(np.asarray(self._stance_q), np.asarray(self._stance_u))
+        fit = ident.fit()
+        if fit is None:
+            return
+        if not fit.significant and l == self.robot.l:
+            self.diagnostics["identified"].append((n, fit.relative.tolist(), None))
+            return
+        try:
+            robot = robot_from_coefficients(self.nominal_robot, fit.theta, l)
+        except ValueError as exc:
+            self.diagnostics["identified"].append((n, fit.relative.tolist(), str(exc)))
+            return
+        self.diagnostics["identified"].append((n, fit.relative.tolist(), robot.l))
+        old, new = self.robot.coefficients(), robot.coefficients()
+        change = max(abs(new[k] / old[k] - 1.0) for k in ("p1", "p2", "p3", "p4", "p5"))
+        if max(change, abs(robot.l / self.robot.l - 1.0)) < MODEL_CHANGE:
+            return  # the model in use already explains the data: no new planner
+        est.set_robot(robot)
+        self.controller.set_robot(robot)
+        self.robot = robot
 
     def _note_fallback(self) -> None:
         rec = self.controller.records[-1] if self.controller.records else None

@@ -1,0 +1,177 @@
+"""Online identification of the swing dynamics: the kernel against an independent integrator,
+the fit against known coefficients, the robot rebuilt from them, and the reference policy with
+it in closed loop under model error."""
+
+import gymnasium as gym
+import numpy as np
+import pytest
+from scipy.integrate import solve_ivp
+
+import envs  # noqa: F401  (registers the ids)
+from controllers import make_reference_policy
+from controllers.identification import (
+    COEFFICIENTS,
+    SwingIdentifier,
+    robot_from_coefficients,
+    simulate_swing,
+)
+from envs.physics import model
+from envs.physics.params import RobotParams
+
+DT = 0.005
+# every physical parameter off (the input gain too): what robot_error draws
+ERRORS = {"m": 0.1, "mH": -0.1, "mHg": 0.1, "Ic": -0.1, "l": 0.08, "lc": -0.05, "ktau": -0.1}
+
+
+def nominal() -> RobotParams:
+    return RobotParams.from_preset("paper")
+
+
+def coefficients_in_nominal_scale(true: RobotParams, nom: RobotParams) -> np.ndarray:
+    """What identification can see: the true coefficients in the nominal input's scale."""
+    c, s = true.coefficients(), nom.input_gain / true.input_gain
+    return np.array([s * c[f"p{i}"] for i in range(1, 6)] + [s * true.Fc, s * true.Fv])
+
+
+def stance_inputs(n: int, phase: float) -> np.ndarray:
+    t = np.arange(n) * DT
+    return 3.0 * np.sin(9.0 * t + phase) + 1.5
+
+
+def test_simulated_swing_matches_an_independent_integrator():
+    P = nominal().vector()
+    x0 = np.array([-0.45, -0.22, 1.8, 1.1])
+    u = stance_inputs(40, 0.3)
+
+    def rhs(t, x):
+        k = min(int(t / DT + 1e-9), u.size - 2)
+        a1, a2 = model.accelerations(P, x[0], x[1], x[2], x[3], u[k])
+        return [x[2], x[3], a1, a2]
+
+    q = simulate_swing(P, x0, u, DT, 4)
+    y = x0.copy()
+    for k in range(u.size - 1):  # piecewise-constant input: one solve per interval
+        sol = solve_ivp(rhs, (k * DT, (k + 1) * DT), y, rtol=1e-11, atol=1e-12)
+        y = sol.y[:, -1]
+        assert np.allclose(q[k + 1], y[:2], atol=1e-8)
+
+
+def test_fit_recovers_the_coefficients_of_a_perturbed_robot_from_its_stances():
+    nom = nominal()
+    true = nom.perturbed({**ERRORS, "Fv": 0.3})
+    theta_true = coefficients_in_nominal_scale(true, nom)
+    P = true.vector()
+    ident = SwingIdentifier(nom, DT, angle_sigma=1e-5)
+    ident.leg_length = true.l  # what the localisation measures
+    starts = [[-0.5, -0.25, 2.0, 1.2], [-0.42, -0.2, 1.6, 0.9], [-0.48, -0.23, 2.4, 1.0]]
+    for i, x0 in enumerate(starts):
+        u = stance_inputs(90, i)
+        # the same input on the true robot, whose input gain differs (what the env does)
+        q = simulate_swing(P, np.array(x0), u, DT, 4)
+        assert ident.add_stance(q, u) == 3  # 0.45 s in segments of 0.15 s
+    fit = ident.fit()
+    assert fit.segments == 9 and fit.rms < 1e-5  # the fit integrates with 2 substeps, not 4
+    assert fit.significant
+    err = fit.theta / theta_true - 1
+    assert np.all(np.abs(err[:5]) < 2e-3), dict(zip(COEFFICIENTS, err))
+    assert abs(err[6]) < 0.05  # viscous friction: a small term, still seen
+    # and the nominal robot's own stance (integrated as the fit does) gives back the nominal
+    # coefficients, which the data then do not reject
+    ident = SwingIdentifier(nom, DT, angle_sigma=1e-5)
+    ident.add_stance(simulate_swing(nom.vector(), np.array(starts[0]), u, DT, 2), u)
+    fit = ident.fit()
+    assert np.all(np.abs(fit.relative) < 1e-4) and not fit.significant
+
+
+def test_robot_from_coefficients_has_them_and_changes_the_nominal_robot_least():
+    nom = nominal()
+    true = nom.perturbed(ERRORS)
+    theta = coefficients_in_nominal_scale(true, nom)
+    robot = robot_from_coefficients(nom, theta, true.l)
+    assert robot.l == pytest.approx(true.l) and robot.input_gain == nom.input_gain
+    c = robot.coefficients()
+    assert np.allclose([c[f"p{i}"] for i in range(1, 6)], theta[:5], rtol=1e-5)
+    assert (robot.Fc, robot.Fv) == pytest.approx(tuple(theta[5:]))
+    nom_theta = coefficients_in_nominal_scale(nom, nom)
+    same = robot_from_coefficients(nom, nom_theta)
+    for k in ("m", "mH", "mHg", "Ic", "lc", "l"):
+        assert getattr(same, k) == pytest.approx(getattr(nom, k), rel=1e-7)
+    with pytest.raises(ValueError, match="7 finite numbers"):
+        robot_from_coefficients(nom, np.r_[theta[:6], np.nan])
+
+
+@pytest.mark.parametrize(
+    ("kwargs", "message"),
+    [
+        ({"angle_sigma": 0.0}, "angle_sigma = 0.0; allowed: > 0"),
+        ({"angle_sigma": 1e-3, "segment": -1.0}, "segment = -1.0; allowed: > 0"),
+        ({"angle_sigma": 1e-3, "prior": (0.1,) * 6}, "prior = .*7 numbers > 0"),
+        ({"angle_sigma": 1e-3, "substeps": 0}, "substeps = 0"),
+    ],
+)
+def test_bad_identification_settings_are_errors(kwargs, message):
+    with pytest.raises(ValueError, match=message):
+        SwingIdentifier(nominal(), DT, **kwargs)
+    with pytest.raises(ValueError, match="stance: q must be"):
+        SwingIdentifier(nominal(), DT, 1e-3).add_stance(np.zeros((10, 3)), np.zeros(10))
+
+
+@pytest.mark.parametrize("identify", [-1, 1.5, True])
+def test_bad_identify_values_are_errors(identify):
+    env = gym.make("roughwalk/CompassGaitStairs-v0")
+    with pytest.raises(ValueError, match="identify = .*an integer >= 0"):
+        make_reference_policy(env, identify=identify)
+
+
+def walk(env, policy, seed):
+    obs, info = env.reset(seed=seed)
+    policy.reset()
+    while True:
+        obs, _, terminated, truncated, info = env.step(policy(obs))
+        if terminated or truncated:
+            return info, info["robot"] if "robot" in info else None
+
+
+# validation courses (seeds from 1,000,000) of the stairs with every parameter +-10 %: the
+# reference policy built on the nominal robot fails on each of them
+FAILED = (1_000_001, 1_000_003, 1_000_004, 1_000_006)
+
+
+def test_identification_walks_stairs_courses_the_nominal_model_fails_on():
+    """Every parameter 10 % off (random sign): after each of the first six footsteps (the
+    default) the policy fits the swing dynamics and switches model where the data reject the
+    one in use. It walks the courses the nominal model fails on, with an identified leg length
+    (from the localisation's drift) that halves the nominal one's error at least, and a reset
+    goes back to the nominal robot."""
+    env = gym.make("roughwalk/CompassGaitStairs-v0", robot_error={"all": 0.1, "draw": "sign"})
+    plain = make_reference_policy(env, identify=0)
+    policy = make_reference_policy(env)
+    for seed in FAILED:
+        info, _ = walk(env, plain, seed)
+        assert info["failure"] is not None, seed
+        _, reset_info = env.reset(seed=seed)
+        true_l = reset_info["robot"]["l"]
+        info, _ = walk(env, policy, seed)
+        assert info["failure"] is None, (seed, info["failure"], policy.diagnostics)
+        fits = policy.diagnostics["identified"]
+        assert [n for n, *_ in fits] == [1, 2, 3, 4, 5, 6]
+        assert policy.robot is not policy.nominal_robot
+        nominal_l = policy.nominal_robot.l
+        assert abs(policy.robot.l - true_l) < 0.5 * abs(nominal_l - true_l)
+        policy.reset()
+        assert policy.robot is policy.nominal_robot
+        assert policy.estimator.robot is policy.controller.robot is policy.nominal_robot
+
+
+def test_identification_keeps_the_nominal_model_for_the_nominal_robot():
+    """On the nominal robot the fits stay near the nominal coefficients and the data do not
+    reject the nominal model: the policy keeps it (and walks)."""
+    env = gym.make("roughwalk/CompassGaitStairs-v0")
+    policy = make_reference_policy(env)
+    for seed in (1_000_000, 1_000_001):
+        info, _ = walk(env, policy, seed)
+        assert info["failure"] is None
+        fits = policy.diagnostics["identified"]
+        assert len(fits) == 6 and all(switched is None for *_, switched in fits)
+        assert np.all(np.abs(np.array(fits[-1][1][:5])) < 0.05), fits[-1]
+        assert policy.robot is policy.nominal_robot
