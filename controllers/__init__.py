@@ -6,6 +6,7 @@ transverse linearization, jump-Riccati receding-horizon control, observer, refer
 from .bezier import BezierConstraint, bernstein_basis, bezier
 from .controller import ControllerConfig, PDController, TransverseController
 from .gains import GainTable
+from .identification import SwingIdentifier
 from .observer import HighGainObserver
 from .planner import (
     FootholdRules,
@@ -29,6 +30,7 @@ __all__ = [
     "PlannerConfig",
     "PlanningError",
     "StepPlan",
+    "SwingIdentifier",
     "TerrainMap",
     "bernstein_basis",
     "bezier",

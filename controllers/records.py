@@ -1,5 +1,6 @@
 """What the controller records about each footstep: :class:`StepRecord` (its plan, its
-tracking, its fallbacks and the per-footstep certificate values)."""
+tracking, its fallbacks and the per-footstep certificate values), and what the reference
+policy's online identification did after it: :class:`IdentificationRecord`."""
 
 from __future__ import annotations
 
@@ -8,7 +9,32 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-__all__ = ["StepRecord"]
+__all__ = ["IdentificationRecord", "StepRecord"]
+
+
+@dataclass(frozen=True)
+class IdentificationRecord:
+    """One fit of the online identification (``controllers.identification``), after a
+    footstep.
+
+    Attributes:
+        footstep: the footstep that ended the stance just added (1 = the first).
+        relative: the fitted coefficients ``(p1, p2, p3, p4, p5, Fc, Fv)`` relative to the
+            nominal ones, minus 1.
+        distance2: the fit's squared Mahalanobis distance from the nominal coefficients.
+        leg_length: the leg length of the model in use after this footstep [m].
+        switched: whether the model in use changed.
+        seconds: wall time of the fit and the switch [s].
+        note: why no model was made of the fit (an invalid robot), else None.
+    """
+
+    footstep: int
+    relative: tuple[float, ...]
+    distance2: float
+    leg_length: float
+    switched: bool
+    seconds: float
+    note: str | None = None
 
 
 @dataclass

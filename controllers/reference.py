@@ -28,6 +28,7 @@ call never raises because of the robot's state.
 from __future__ import annotations
 
 import math
+import time
 from typing import Any
 
 import gymnasium as gym
@@ -40,6 +41,7 @@ from .estimator import IMPACT, START, SensorStateEstimator
 from .identification import SwingIdentifier, robot_from_coefficients
 from .observer import DEFAULT_EPS
 from .planner import GaitPlanner, PlannerConfig
+from .records import IdentificationRecord
 
 __all__ = ["PDPolicy", "ReferencePolicy", "make_reference_policy"]
 
@@ -84,8 +86,8 @@ class ReferencePolicy:
             nearest robot with them (its leg length from the localisation's drift when
             ``localise`` is on, else the nominal one) when the data reject the model in use;
             0: off (the nominal model throughout). Default :data:`DEFAULT_IDENTIFY`. The fits
-            are in :attr:`diagnostics` (``"identified"``: footstep, relative coefficient
-            changes, the leg length switched to or None).
+            are in :attr:`diagnostics` (``"identified"``: one
+            :class:`controllers.records.IdentificationRecord` per fit).
         controller_kwargs: passed to the controller class (``kp``, ``kd`` for :class:`PDPolicy`).
     """
 
@@ -258,6 +260,7 @@ class ReferencePolicy:
         n = self.diagnostics["footsteps"] + 1  # the footstep that just ended the stance
         if n > self.identify or len(self._stance_q) != len(self._stance_u):
             return
+        t0 = time.perf_counter()
         est, l = self.estimator, self.robot.l  # noqa: E741
         loc = est.localiser
         if loc is not None and abs(loc.drift) > DRIFT_Z * math.sqrt(loc.cov[1, 1]):
@@ -268,22 +271,31 @@ class ReferencePolicy:
         fit = ident.fit()
         if fit is None:
             return
-        if not fit.significant and l == self.robot.l:
-            self.diagnostics["identified"].append((n, fit.relative.tolist(), None))
-            return
-        try:
-            robot = robot_from_coefficients(self.nominal_robot, fit.theta, l)
-        except ValueError as exc:
-            self.diagnostics["identified"].append((n, fit.relative.tolist(), str(exc)))
-            return
-        self.diagnostics["identified"].append((n, fit.relative.tolist(), robot.l))
+        robot, note = self.robot, None
+        if fit.significant or l != self.robot.l:
+            try:
+                robot = robot_from_coefficients(self.nominal_robot, fit.theta, l)
+            except ValueError as exc:
+                note = str(exc)
         old, new = self.robot.coefficients(), robot.coefficients()
         change = max(abs(new[k] / old[k] - 1.0) for k in ("p1", "p2", "p3", "p4", "p5"))
-        if max(change, abs(robot.l / self.robot.l - 1.0)) < MODEL_CHANGE:
-            return  # the model in use already explains the data: no new planner
-        est.set_robot(robot)
-        self.controller.set_robot(robot)
-        self.robot = robot
+        # below MODEL_CHANGE the model in use already explains the data: no new planner
+        switch = max(change, abs(robot.l / self.robot.l - 1.0)) >= MODEL_CHANGE
+        if switch:
+            est.set_robot(robot)
+            self.controller.set_robot(robot)
+            self.robot = robot
+        self.diagnostics["identified"].append(
+            IdentificationRecord(
+                n,
+                tuple(fit.relative.tolist()),
+                fit.distance2,
+                self.robot.l,
+                switch,
+                time.perf_counter() - t0,
+                note,
+            )
+        )
 
     def _note_fallback(self) -> None:
         rec = self.controller.records[-1] if self.controller.records else None

@@ -216,6 +216,15 @@ def test_bad_perception_is_a_clear_error(policy, perception, match):
         make_eval_env(policy, "roughwalk/CompassGaitStairs-v0", perception=perception)
 
 
+def test_identification_is_on_by_default_and_off_with_identify_0():
+    env, policy, _, _ = make_eval_env("reference", "roughwalk/CompassGaitStairs-v0")
+    assert policy.identify == 6 and policy.identifier is not None
+    env.close()
+    env, policy, _, _ = make_eval_env("pd", "roughwalk/CompassGaitStairs-v0", identify=0)
+    assert policy.identify == 0 and policy.identifier is None
+    env.close()
+
+
 def test_planner_controller_and_observer_options_reach_the_reference_policy():
     env, policy, _, _ = make_eval_env(
         "reference",
@@ -223,7 +232,9 @@ def test_planner_controller_and_observer_options_reach_the_reference_policy():
         planner={"min_thetadot": 0.45},
         controller={"horizon": 2},
         observer_eps=0.03,
+        identify=2,
     )
+    assert policy.identify == 2
     ctrl = policy.controller
     assert ctrl.planner.config.min_thetadot == 0.45
     # the rest of the planner config is the robot preset's
@@ -244,6 +255,9 @@ def test_planner_controller_and_observer_options_reach_the_reference_policy():
         ("reference", {"observer_eps": "fast"}, r"observer_eps = 'fast'; allowed"),
         ("passive", {"planner": {"min_thetadot": 0.3}}, r"planner: applies to the pd and"),
         ("passive", {"observer_eps": 0.03}, r"observer_eps: applies to the pd and reference"),
+        ("reference", {"identify": -1}, r"identify = -1; allowed: an integer >= 0"),
+        ("reference", {"identify": True}, r"identify = True; allowed: an integer >= 0"),
+        ("passive", {"identify": 0}, r"identify: applies to the pd and reference"),
     ],
 )
 def test_bad_controller_options_are_clear_errors(policy, options, match):

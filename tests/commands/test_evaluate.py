@@ -226,6 +226,8 @@ def test_controller_settings_from_the_command_line(tmp_path: Path, capsys, episo
         (["--policy", "reference", "--controller", "horizon=0"], "ControllerConfig.horizon = 0"),
         (["--policy", "reference", "--observer-eps", "0"], "observer_eps = 0.0; allowed"),
         (["--policy", "passive", "--observer-eps", "0.02"], "applies to the pd and reference"),
+        (["--policy", "passive", "--identify", "0"], "identify: applies to the pd and reference"),
+        (["--policy", "reference", "--identify", "-1"], "--identify: must be"),
     ]
     for extra, message in bad:
         assert main([*argv, *extra]) == 2
@@ -233,7 +235,7 @@ def test_controller_settings_from_the_command_line(tmp_path: Path, capsys, episo
         assert message in err and len(err.strip().splitlines()) == 1, err
     assert episode_count[0] == 0
     out = tmp_path / "first_wave.json"
-    first_wave = ["--perception", "known-map", "--observer-eps", "0.02"]
+    first_wave = ["--identify", "0", "--perception", "known-map", "--observer-eps", "0.02"]
     first_wave += ["--planner", "end_thetadot_floor=0", "--controller", "tube_replans=0"]
     assert main([*argv, "--policy", "reference", *first_wave, "--json", str(out)]) == 0
     data = json.loads(out.read_text())

@@ -154,8 +154,9 @@ def test_identification_walks_stairs_courses_the_nominal_model_fails_on():
         info, _ = walk(env, policy, seed)
         assert info["failure"] is None, (seed, info["failure"], policy.diagnostics)
         fits = policy.diagnostics["identified"]
-        assert [n for n, *_ in fits] == [1, 2, 3, 4, 5, 6]
-        assert policy.robot is not policy.nominal_robot
+        assert [r.footstep for r in fits] == [1, 2, 3, 4, 5, 6]
+        assert any(r.switched for r in fits) and policy.robot is not policy.nominal_robot
+        assert fits[-1].leg_length == policy.robot.l
         nominal_l = policy.nominal_robot.l
         assert abs(policy.robot.l - true_l) < 0.5 * abs(nominal_l - true_l)
         policy.reset()
@@ -172,6 +173,6 @@ def test_identification_keeps_the_nominal_model_for_the_nominal_robot():
         info, _ = walk(env, policy, seed)
         assert info["failure"] is None
         fits = policy.diagnostics["identified"]
-        assert len(fits) == 6 and all(switched is None for *_, switched in fits)
-        assert np.all(np.abs(np.array(fits[-1][1][:5])) < 0.05), fits[-1]
+        assert len(fits) == 6 and not any(r.switched for r in fits)
+        assert np.all(np.abs(np.array(fits[-1].relative[:5])) < 0.05), fits[-1]
         assert policy.robot is policy.nominal_robot
