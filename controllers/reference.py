@@ -15,6 +15,11 @@ located touchdown, and, shortly after the start, once the observer has converged
 (``settle_time``), replans the current step from the estimate. In ``fixed-plan`` mode it
 tracks the plan made at the start and only advances it at each touchdown.
 
+Model: the policy starts on the env's nominal robot and, after each of the first ``identify``
+footsteps, fits the swing dynamics to the encoder readings and inputs of the stances walked
+(:mod:`controllers.identification`); where the data reject the model in use, the estimator,
+planner and feedback switch to the identified robot there, before the replan at that touchdown.
+
 Safe behaviour: if planning fails, the controller degrades in the order of
 ``ControllerConfig.fallbacks`` (relaxed planning settings, the previous plan, the
 least-violating steps, then a single step held with PD on ``y``; see
