@@ -46,6 +46,8 @@ from scipy.optimize import least_squares
 from envs.physics import model
 from envs.physics.params import P1, P2, P3, P4, P5, PFC, PFV, RobotParams
 
+from .numerics import one_blas_thread
+
 __all__ = [
     "COEFFICIENTS",
     "PRIOR",
@@ -211,6 +213,7 @@ class SwingIdentifier:
             x0[i, 2:] = np.polyfit(np.arange(k) * self.dt, q[:k], 1)[0]
         return x0
 
+    @one_blas_thread
     def fit(self) -> IdentifiedModel | None:
         """The coefficients that best explain the segments so far (None without data).
 
@@ -317,6 +320,7 @@ class SwingIdentifier:
         return fit, rms
 
 
+@one_blas_thread
 def robot_from_coefficients(
     nominal: RobotParams,
     theta: np.ndarray,

@@ -5,6 +5,7 @@ Ids (namespace ``roughwalk``), each with the native vector env as ``vector_entry
 * ``roughwalk/CompassGait-v0``: fully configurable by keyword arguments (defaults: ``flat``).
 * ``roughwalk/CompassGaitFlat-v0``: the paper's robot on level ground.
 * ``roughwalk/CompassGaitStairs-v0``: the paper's experiment, flat, down two stairs, flat.
+* ``roughwalk/CompassGaitStairsUp-v0``: the same course climbed, up two 1 cm stairs.
 * ``roughwalk/CompassGaitRough-v0``: random blocks drawn anew from the seed at every reset
   (keyword ``difficulty`` scales the block heights).
 * ``roughwalk/CompassGaitSlope-v0``: the classic walker on a 0.0525 rad downhill.
@@ -26,6 +27,7 @@ ENV_IDS: dict[str, str] = {
     "CompassGait-v0": "flat",
     "CompassGaitFlat-v0": "flat",
     "CompassGaitStairs-v0": "stairs",
+    "CompassGaitStairsUp-v0": "stairs_up",
     "CompassGaitRough-v0": "rough",
     "CompassGaitSlope-v0": "slope",
 }

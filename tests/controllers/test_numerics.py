@@ -14,11 +14,16 @@ from controllers.reference import ReferencePolicy
 
 
 def _actions(threads: int, steps: int = 600) -> np.ndarray:
-    """Reference-policy actions on a rough course, every BLAS library limited to ``threads``
-    (a fresh periodic-gait cache, so the gait too is computed under that limit)."""
+    """Reference-policy actions on a rough course with model error (so the online
+    identification fits and switches the model), every BLAS library limited to ``threads`` (a
+    fresh periodic-gait cache, so the gait too is computed under that limit)."""
     GaitPlanner.gait_cache = GaitCache()
     with threadpool_limits(limits=threads):
-        env = gym.make("roughwalk/CompassGaitRough-v0", difficulty=1.0)
+        env = gym.make(
+            "roughwalk/CompassGaitRough-v0",
+            difficulty=1.0,
+            robot_error={"all": 0.1, "draw": "sign"},
+        )
         obs, _ = env.reset(seed=1_000_000)
         policy = ReferencePolicy(env)
         out = []
@@ -28,6 +33,7 @@ def _actions(threads: int, steps: int = 600) -> np.ndarray:
             obs, _, terminated, truncated, _ = env.step(action)
             if terminated or truncated:
                 break
+        assert any(r.switched for r in policy.diagnostics["identified"])
     return np.array(out)
 
 
@@ -37,7 +43,8 @@ def _actions(threads: int, steps: int = 600) -> np.ndarray:
 def test_episode_is_the_same_with_one_or_two_blas_threads(monkeypatch):
     """A multithreaded BLAS sums in another order; the controller runs its linear algebra on
     one thread, so a rough-course episode (600 ticks, which amplify last-bit differences into
-    1e-6 differences of the action without it) is bit for bit the same."""
+    1e-7-1e-6 differences of the action without it: the planner's, and the identification's
+    fits) is bit for bit the same."""
     monkeypatch.setattr(GaitPlanner, "gait_cache", GaitPlanner.gait_cache)
     one, two = _actions(1), _actions(2)
     assert one.size == two.size == 600
