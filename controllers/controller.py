@@ -39,8 +39,15 @@ steps (the current one and a look-ahead for the Riccati equation):
 * ``"previous plan"``: the rest of the previous plan, shifted by one footstep, while it still
   looks at least one step ahead;
 * ``"least violation"``: the two least-violating steps
-  (:meth:`GaitPlanner.plan_least_violation`, from the last relaxation's settings), tracked with
-  the transverse feedback like any plan.
+  (:meth:`GaitPlanner.plan_least_violation`, from the last relaxation's settings).
+
+A plan outside the full problem's constraints (from a relaxation, or the least-violating
+steps) is tracked with PD on ``y`` by default (``ControllerConfig.relaxed_feedback = "pd"``,
+:data:`FALLBACK_PD`), the speed along it left to the hybrid zero dynamics: its nominal input
+uses the torque reserve or more, or it is not feasible at all, and the Riccati feedback's pull
+on ``I`` towards its nominal speed then takes from the hip what the motion needs
+(``"riccati"``: the transverse feedback, as for every other plan). Shorter look-aheads and the
+previous plan were feasible with the full settings and keep the transverse feedback.
 
 Within the full problem and each relaxation, a search that fails beyond the second step keeps
 the feasible steps before the failure (``"shorter horizon"``, or the relaxation's name followed
@@ -92,12 +99,15 @@ __all__ = [
     "TransverseController",
 ]
 
-#: PD gains (kp [1/s^2], kd [1/s]) used on a last remaining planned step
+#: PD gains (kp [1/s^2], kd [1/s]) on a last remaining planned step and on relaxed plans
 FALLBACK_PD = (400.0, 40.0)
 
 #: the controller's modes (:attr:`ControllerConfig.mode`): replan at every footstep, or track
 #: one plan made at reset (the paper's setting, with its Appendix A certificate)
 MODES = ("replan", "fixed-plan")
+
+#: what tracks a relaxed or least-violating plan (``ControllerConfig.relaxed_feedback``)
+RELAXED_FEEDBACK = ("pd", "riccati")
 
 #: footsteps per simulated second a fixed plan is sized for when only the run's duration is
 #: known (:meth:`ControllerConfig.for_mode`); the paper robot takes about 1.1
@@ -155,6 +165,10 @@ class ControllerConfig:
             ``fallbacks``; the full problem is not tried first). Default
             :data:`TUBE_FALLBACKS`: ``duration_min`` 0.05 s with the torque limit, then the
             current plan.
+        relaxed_feedback: what tracks a plan outside the full problem's constraints (the
+            step's ``fallback`` is a relaxation, ``"relaxed: ..."``, or ``"least violation"``):
+            ``"pd"`` (default), PD on ``y`` with :data:`FALLBACK_PD`, no feedback on the speed
+            along the motion; ``"riccati"``, the transverse feedback as for every other plan.
     """
 
     horizon: int = 3
@@ -174,6 +188,7 @@ class ControllerConfig:
     tube_phase: float = 0.6
     tube_replans: int = 1
     tube_fallbacks: tuple = TUBE_FALLBACKS
+    relaxed_feedback: str = "pd"
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "fallbacks", fallback_items(self.fallbacks))
@@ -218,6 +233,11 @@ class ControllerConfig:
             object.__setattr__(self, name, v)
         if not isinstance(self.replan, (bool, np.bool_)):
             raise ValueError(f"ControllerConfig.replan = {self.replan!r}; allowed: True or False")
+        if self.relaxed_feedback not in RELAXED_FEEDBACK:
+            raise ValueError(
+                f"ControllerConfig.relaxed_feedback = {self.relaxed_feedback!r}; allowed: "
+                + ", ".join(repr(v) for v in RELAXED_FEEDBACK)
+            )
 
     @property
     def mode(self) -> str:
@@ -290,6 +310,10 @@ class TransverseController:
     from the jump of ``q2`` (the new stance foot is then located from the configuration). For
     exact footholds drive it with :meth:`on_impact` (see :meth:`rollout`).
     """
+
+    #: the feedback acts on the speed along the motion (``I``); relaxed plans are then
+    #: tracked as ``ControllerConfig.relaxed_feedback`` says
+    speed_feedback = True
 
     def __init__(
         self,
@@ -407,6 +431,7 @@ class TransverseController:
             rec = self.records[-1]
             rec.fallback = rec.reason = None
             rec.plan_evaluations, rec.budget_exhausted, rec.degradations = 0, False, []
+            rec.pd_feedback = False
         self._last_q2 = float(q[1])
         if new_step or not math.isfinite(self._theta_start):
             self._theta_start = float(q[1])
@@ -433,7 +458,13 @@ class TransverseController:
                     break
             if len(models) >= 2:
                 try:
-                    sol = self._gains(models)
+                    fb = rec.fallback or ""
+                    relaxed = fb.startswith("relaxed") or fb == "least violation"
+                    if relaxed and cfg.relaxed_feedback == "pd" and self.speed_feedback:
+                        sol = pd_gains(models, cfg.grid, *FALLBACK_PD)
+                        rec.pd_feedback = True
+                    else:
+                        sol = self._gains(models)
                 except ValueError as exc:
                     rec.reason = " | ".join(filter(None, (rec.reason, f"gains: {exc}")))
                     models = models[:1]
@@ -736,6 +767,8 @@ class PDController(TransverseController):
         kp: proportional gain [1/s^2], > 0; kd: derivative gain [1/s], > 0 (defaults: a
             critically damped pair with poles at -20 rad/s).
     """
+
+    speed_feedback = False  # PD on y everywhere: relaxed plans need no other feedback
 
     def __init__(
         self,

@@ -76,6 +76,8 @@ class StepRecord:
             (``ControllerConfig.tube_*``).
         max_xperp_norm: largest Euclidean norm of ``x_perp = [I, y, y_dot]`` over the step
             (0 without gains).
+        pd_feedback: the step's relaxed or least-violating plan is tracked with PD on ``y``
+            (``ControllerConfig.relaxed_feedback``; ``V`` is then PD's, with ``P = I``).
     """
 
     index: int
@@ -102,12 +104,16 @@ class StepRecord:
     budget_exhausted: bool = False
     degradations: list[str] = field(default_factory=list)
     retargets: int = 0
+    pd_feedback: bool = False
 
     def certificate(self) -> dict[str, float | None]:
         """The step's certificate values as plain data: ``V_start``, ``V_end``, ``V_ratio``,
         ``max_xperp_norm``, ``max_abs_u``; None for what is unknown or not finite, and for
         the ``V`` values of a step without Riccati gains (held with PD, or zero input)."""
-        riccati = self.fallback not in ("PD on the last planned step", "zero input")
+        riccati = not self.pd_feedback and self.fallback not in (
+            "PD on the last planned step",
+            "zero input",
+        )
         values = {
             "V_start": self.V_start if riccati else math.nan,
             "V_end": self.V_end if riccati else math.nan,

@@ -35,8 +35,24 @@ def test_a_relaxed_step_keeps_the_robot_walking_where_the_full_problem_has_none(
     for r in relaxed:
         assert r.reason.startswith("full problem: planning failed at step")
         assert r.degradations == ["full problem", "relaxed: torque_fraction=0.8"]
-        assert np.isfinite(r.V_end) and r.ticks > 0  # tracked with the transverse feedback
+        # a relaxed plan is tracked with PD on y (ControllerConfig.relaxed_feedback)
+        assert r.pd_feedback and r.ticks > 0 and r.certificate()["V_start"] is None
     assert all(r.fallback != "zero input" for r in out["records"])
+    full = [r for r in out["records"] if r.fallback is None]
+    assert full and not any(r.pd_feedback for r in full)  # full plans: transverse feedback
+
+
+def test_relaxed_plans_can_keep_the_transverse_feedback(gait):
+    """``relaxed_feedback="riccati"`` (the previous default): the same relaxed steps are tracked
+    with the Riccati feedback, whose ``V`` the certificate reports."""
+    relax = ControllerConfig(
+        fallbacks=[{"torque_fraction": 0.8}], relaxed_feedback="riccati", **ROOMY
+    )
+    out, _ = walk(RISE, gait, relax, {**TIGHT, **ROOMY_PLANNER})
+    assert out["failure"] is None and len(out["impacts"]) >= 5
+    relaxed = [r for r in out["records"] if r.fallback == "relaxed: torque_fraction=0.8"]
+    assert relaxed and not any(r.pd_feedback for r in out["records"])
+    assert all(np.isfinite(r.certificate()["V_end"]) for r in relaxed)
 
 
 def test_without_degradations_the_same_course_ends_in_a_fall_or_zero_input(gait):
@@ -63,7 +79,7 @@ def test_least_violating_steps_replace_zero_input(gait):
         if r.fallback == "least violation":
             assert r.degradations == ["full problem", "least violation"]
             assert "least violation: worst violation" in r.reason
-            assert r.max_abs_u > 0 and r.ticks > 0 and np.isfinite(r.V_end)
+            assert r.max_abs_u > 0 and r.ticks > 0 and r.pd_feedback
 
 
 def test_degradation_order_is_configurable_and_validated():
@@ -80,5 +96,7 @@ def test_degradation_order_is_configurable_and_validated():
     for bad in ("least violation", ["zero input"], [{"no_such_field": 1.0}], [{}], [3]):
         with pytest.raises(ValueError, match="fallbacks"):
             ControllerConfig(fallbacks=bad)
+    with pytest.raises(ValueError, match="relaxed_feedback = 'lqr'; allowed: 'pd', 'riccati'"):
+        ControllerConfig(relaxed_feedback="lqr")
     with pytest.raises(ValueError, match="torque_fraction"):  # checked by the robot's planner
         TransverseController("paper", "flat", {"fallbacks": [{"torque_fraction": 1.5}]})

@@ -134,7 +134,7 @@ def walk(env, policy, seed):
 
 # validation courses (seeds from 1,000,000) of the stairs with every parameter +-10 %: the
 # reference policy built on the nominal robot fails on each of them
-FAILED = (1_000_001, 1_000_003, 1_000_004, 1_000_006)
+FAILED = (1_000_001, 1_000_003, 1_000_006, 1_000_008)
 
 
 def test_identification_walks_stairs_courses_the_nominal_model_fails_on():
