@@ -102,6 +102,10 @@ class PlannerConfig:
             speed ``n`` steps later over footholds ``step_length`` apart, backwards through the
             gait step's closed-form reduced dynamics and impact loss (a rise further ahead
             speeds up the current step).
+        pairs_first: 1: with a look-ahead, try every candidate foothold's step jointly with the
+            next one before any step alone (a foothold from which no next step exists, say
+            too close before a riser, is then searched beyond only as a last resort); 0
+            tries each foothold's pair and then the step alone before the next foothold.
         candidates: footholds tried per step before giving up.
         candidate_spacing: least spacing between the footholds tried [m].
 
@@ -154,6 +158,7 @@ class PlannerConfig:
     lookahead: int = 2
     lookahead_rise: float = 0.002
     energy_horizon: int = 0
+    pairs_first: int = 0
     candidates: int = 4
     candidate_spacing: float = 0.01
 
@@ -180,6 +185,7 @@ class PlannerConfig:
             "candidates": 1,
             "lookahead": 0,
             "energy_horizon": 0,
+            "pairs_first": 0,
         }
         for name, lo in ints.items():
             v = getattr(self, name)
@@ -208,6 +214,8 @@ class PlannerConfig:
             raise ValueError(
                 f"PlannerConfig.torque_fraction = {self.torque_fraction}; allowed: <= 1"
             )
+        if self.pairs_first > 1:
+            raise ValueError(f"PlannerConfig.pairs_first = {self.pairs_first}; allowed: 0 or 1")
         if self.lookahead > 2:
             raise ValueError(f"PlannerConfig.lookahead = {self.lookahead}; allowed: 0, 1 or 2")
         self.rules()  # validates the foothold fields

@@ -368,6 +368,8 @@ class FootholdChains:
             cx, why = self.chain_footholds(tmap, x)
             if cx.size == 0:
                 return f"from a stance foot at x = {x:.3f} m: {why}"
+            if depth <= 0:
+                return ""  # the chain spans ``depth`` footholds: it does not end
             depth -= 1
             x = float(max(cx, key=lambda c: self.reach(tmap, float(c), depth)))
 

@@ -200,10 +200,20 @@ class StepSearch:
         # Rounds over the candidate footholds, each reached only when the steps planned after
         # the previous round's options failed: (1) the configured cost; (2) ten times the weight
         # on ending the step like the periodic gait. A step is optimised jointly with the next
-        # one always (lookahead 1) or where the next step changes height (lookahead 2).
+        # one always (lookahead 1) or where the next step changes height (lookahead 2). With
+        # ``pairs_first`` each round first tries every candidate's pair (a step with a next one
+        # that is feasible too), then alone the steps whose pair failed: a foothold from which
+        # the next step is infeasible is searched beyond only when no other foothold's is
         rounds = (1.0, 10.0)
-        for wscale, i in [(w, i) for w in rounds for i in order]:
+        # (at the horizon's last step a pair's second step is beyond it: each foothold's pair,
+        # then its step alone, as without ``pairs_first``)
+        staged = cfg.pairs_first and cfg.lookahead and j < self.horizon - 1
+        stages = (True, False) if staged else (None,)
+        paired: set[int] = set()  # candidates whose step was solved in a pair stage
+        for wscale, stage, i in [(w, g, i) for w in rounds for g in stages for i in order]:
             sm.wscale = wscale
+            if stage is False and i not in paired:
+                continue  # solved alone in the pair stage (no next step to pair it with)
             if self.budget <= 0 or self.evaluations.exhausted:
                 break
             self.budget -= 1
@@ -241,9 +251,11 @@ class StepSearch:
                     x02 = memo.hints.get(_hint_key(fh, fx2.foothold), x02)
             ev, ok = None, False
             try:
-                if fx2 is not None:
+                if fx2 is not None and stage is not False:
                     ev, ok = self._solve_pair(fx, x0, fx2, x02, keep)
-                if not ok:
+                    if stage:
+                        paired.add(i)
+                if not ok and not (stage and fx2 is not None):
                     ev, ok = self._solve(fx, x0, keep)
             except BudgetExhausted:
                 break

@@ -15,6 +15,8 @@ def test_bad_config_raises():
         PlannerConfig(order=3)
     with pytest.raises(ValueError, match="step_min"):
         PlannerConfig(step_min=0.3, step_length=0.2)
+    with pytest.raises(ValueError, match=r"pairs_first = 2; allowed: 0 or 1"):
+        PlannerConfig(pairs_first=2)
 
 
 @pytest.mark.parametrize("key", ["retract", "arm_distance"])

@@ -112,6 +112,8 @@ def test_chain_lengths_match_an_exhaustive_search(terrain):
     wall = TerrainMap(Terrain.stairs([0.4], [0.3]))
     assert chains.reach(wall, 0.0, 5) < 5
     assert "no admissible foothold" in chains.reach_break(wall, 0.0, 5)
+    spanned = next(x for x in np.linspace(0.0, 0.9, 10) if chains.chain(tmap, x, 2))
+    assert chains.reach_break(tmap, spanned, 2) == ""  # a chain that does not end
 
 
 def test_ranked_candidates_pick_spaced_footholds_that_keep_a_chain():

@@ -4,7 +4,7 @@ regulation over several replanning calls."""
 import numpy as np
 import pytest
 
-from controllers.planner import GaitPlanner
+from controllers.planner import GaitPlanner, PlanningError
 from envs.physics.terrain import Terrain
 
 from .cases import CASES, PAPER_STAIRS
@@ -98,3 +98,34 @@ def test_the_end_speed_floor_keeps_a_speed_reserve_before_a_drop(planners):
     assert end["plain", "drop"] < end["plain", "flat"] - 0.1  # slowed down before the drop
     assert end["floored", "drop"] > end["plain", "drop"] + 0.05
     assert end["floored", "flat"] == pytest.approx(end["plain", "flat"], rel=1e-9)
+
+
+# A post-impact state of the paper robot 0.49 m before a 1.4 cm riser (from a walk on random
+# blocks): the third step's nearest foothold leaves the climb no feasible step, one 6 mm further
+# back does, after slowing down.
+_BEFORE_RISER = (
+    np.array([-0.4922489666227731, -0.30270013921240413]),
+    np.array([0.4186426520283657, 0.9254189825418276]),
+)
+
+
+def test_pairs_first_finds_the_climb_that_a_foothold_before_the_riser_hides():
+    """With ``pairs_first`` (the paper robot's default) the search tries the other footholds'
+    pairs (a step with its next one) before searching beyond a foothold whose pair failed: the
+    plan over the riser is found within the replanning budget, and is the plan the whole search
+    finds."""
+    terr = Terrain.stairs([0.966], [0.014])
+    state, stance = _BEFORE_RISER, (0.476, 0.0)
+    greedy = GaitPlanner("paper", {"pairs_first": 0})
+    with pytest.raises(PlanningError) as err:
+        greedy.plan(terr, state, stance, horizon=4, max_evaluations=2000)
+    assert err.value.budget_exhausted and err.value.step == 3
+    whole = greedy.plan(terr, state, stance, horizon=4)
+    assert whole.evaluations > 4000
+    paired = GaitPlanner("paper")
+    assert paired.config.pairs_first == 1
+    plan = paired.plan(terr, state, stance, horizon=4, max_evaluations=2000)
+    assert len(plan) == 4 and plan.evaluations < 1500
+    np.testing.assert_allclose(plan.footholds, whole.footholds, atol=1e-9)
+    assert plan[3].foothold[1] == pytest.approx(0.014)  # on top of the riser
+    assert plan[2].thetadot_minus < 0.8 * plan[1].thetadot_minus  # slowed down before it
