@@ -5,8 +5,11 @@ step's start), warm-started from the previous plan; where the ground changes hei
 optimised jointly with the next one (only the first is kept), which lets it anticipate drops and
 rises. Footholds come ranked by :meth:`FootholdChains.ranked`; when a step has no feasible
 solution the search backtracks to other footholds and to shapes that end closer to the gait
-(depth first, with a budget of step solves). Terrain on which no chain of admissible footholds
-spans the horizon fails at once, naming the step without a foothold.
+(depth first, with a budget of step solves). With ``PlannerConfig.pairs_first`` every
+foothold's pair is tried before any step alone, so the search goes beyond a foothold from
+which the next step is infeasible only when no other foothold's pair is feasible. Terrain on
+which no chain of admissible footholds spans the horizon fails at once, naming the step without
+a foothold.
 
 Step problems already solved during the current walk are reused (:class:`StepSolutions`:
 replanning from the planned state re-solves only the newly added step), and a look-ahead step
