@@ -77,7 +77,8 @@ class StepRecord:
         max_xperp_norm: largest Euclidean norm of ``x_perp = [I, y, y_dot]`` over the step
             (0 without gains).
         pd_feedback: the step's relaxed or least-violating plan is tracked with PD on ``y``
-            (``ControllerConfig.relaxed_feedback``; ``V`` is then PD's, with ``P = I``).
+            (``ControllerConfig.relaxed_feedback``; ``V`` is then PD's, with ``P = I``, and
+            :meth:`certificate` reports none).
     """
 
     index: int

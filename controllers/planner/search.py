@@ -240,7 +240,10 @@ class StepSearch:
             # or as the second step of a pair) is kept when still feasible; it is re-optimised
             # when it becomes the first step from an actual state off the plan
             keep = j > 0 and solved
-            nxt = self._next_template(fh, q1m, q2m) if cfg.lookahead else None
+            # (no pair in a round's second stage: its steps are solved alone)
+            nxt = (
+                self._next_template(fh, q1m, q2m) if cfg.lookahead and stage is not False else None
+            )
             if nxt is not None and cfg.lookahead == 2:  # where the ground changes height
                 dh = abs(nxt[0].foothold[1] - fh[1]) + abs(fh[1] - stance[1])
                 nxt = nxt if dh > cfg.lookahead_rise else None
@@ -254,7 +257,7 @@ class StepSearch:
                     x02 = memo.hints.get(_hint_key(fh, fx2.foothold), x02)
             ev, ok = None, False
             try:
-                if fx2 is not None and stage is not False:
+                if fx2 is not None:
                     ev, ok = self._solve_pair(fx, x0, fx2, x02, keep)
                     if stage:
                         paired.add(i)

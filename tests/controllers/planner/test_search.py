@@ -101,8 +101,8 @@ def test_the_end_speed_floor_keeps_a_speed_reserve_before_a_drop(planners):
 
 
 # A post-impact state of the paper robot 0.49 m before a 1.4 cm riser (from a walk on random
-# blocks): the third step's nearest foothold leaves the climb no feasible step, one 6 mm further
-# back does, after slowing down.
+# blocks): searched depth first, the third step's first foothold leaves the climb no feasible
+# step; another foothold's pair climbs, after slowing down.
 _BEFORE_RISER = (
     np.array([-0.4922489666227731, -0.30270013921240413]),
     np.array([0.4186426520283657, 0.9254189825418276]),
