@@ -557,6 +557,8 @@ class TransverseController:
                         notes.append(f"{name}: worst violation {worst[0]:.3g} ({worst[1]})")
             self.plan, self._plan_offset = plan, 0
             rec.fallback = None if level is None and name == "full problem" else name
+            if plan.steps[0].note:
+                notes.append(f"{name}: {plan.steps[0].note}")
             rec.reason = " | ".join(notes) or None
             return plan.steps
         rec.reason = " | ".join(notes) or None

@@ -6,6 +6,7 @@ defaults live in ``configs/planner/<preset>.yaml``.
 
 from __future__ import annotations
 
+import dataclasses
 import functools
 import math
 from dataclasses import asdict, dataclass, fields
@@ -61,6 +62,12 @@ class PlannerConfig:
             (room for the next swing's retracted foot to clear the riser) [m/m].
         rise_margin: extra distance from a step-up riser ahead of a foothold, per metre of rise
             (room for the next swing foot to clear the riser) [m/m].
+        relaxed_margin: the fraction of ``drop_margin`` and ``rise_margin`` a step keeps where
+            the full margins leave its stance foot no admissible foothold, in [0, 1] (1: no
+            relaxation). On stairs the admissible footholds form windows; a foot that landed
+            between two (a model error, a push) would otherwise have no step at all. The step's
+            constraints still check the swing foot's clearance over the riser, and footholds
+            are still ranked by the chains the full margins leave open.
         q1_min, q1_max: inter-leg angle at touchdown bounds [rad].
         max_rise, max_drop: largest height gain / loss in one step [m].
         duration_min, duration_max: step duration bounds [s] (Assumption 1).
@@ -130,6 +137,7 @@ class PlannerConfig:
     edge_margin: float = 0.02
     drop_margin: float = 4.0
     rise_margin: float = 4.0
+    relaxed_margin: float = 1.0
     q1_min: float = 0.2
     q1_max: float = 1.0
     max_rise: float = 0.05
@@ -200,7 +208,7 @@ class PlannerConfig:
             if not getattr(self, name) > 0:
                 raise ValueError(f"PlannerConfig.{name} = {getattr(self, name)!r}; allowed: > 0")
         nonneg = (
-            "edge_margin drop_margin rise_margin max_rise max_drop clearance "
+            "edge_margin drop_margin rise_margin relaxed_margin max_rise max_drop clearance "
             "lookahead_rise arm_clearance retracted_clearance face_clearance touchdown_slope "
             "gait_min_thetadot end_thetadot_floor w_speed w_end w_shape w_torque w_slope "
             "time_budget"
@@ -214,6 +222,10 @@ class PlannerConfig:
             raise ValueError(
                 f"PlannerConfig.torque_fraction = {self.torque_fraction}; allowed: <= 1"
             )
+        if not self.relaxed_margin <= 1:
+            raise ValueError(
+                f"PlannerConfig.relaxed_margin = {self.relaxed_margin}; allowed: [0, 1]"
+            )
         if self.pairs_first > 1:
             raise ValueError(f"PlannerConfig.pairs_first = {self.pairs_first}; allowed: 0 or 1")
         if self.lookahead > 2:
@@ -223,6 +235,17 @@ class PlannerConfig:
     def rules(self) -> FootholdRules:
         """The foothold rules of this configuration."""
         return _rules(self)
+
+    def relaxed_rules(self) -> FootholdRules | None:
+        """The foothold rules with the riser margins scaled by ``relaxed_margin`` (None when
+        that changes nothing)."""
+        if self.relaxed_margin >= 1 or (self.drop_margin == 0 and self.rise_margin == 0):
+            return None
+        return dataclasses.replace(
+            self.rules(),
+            drop_margin=self.drop_margin * self.relaxed_margin,
+            rise_margin=self.rise_margin * self.relaxed_margin,
+        )
 
     def _make_rules(self) -> FootholdRules:
         return FootholdRules(

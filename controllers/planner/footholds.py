@@ -239,10 +239,20 @@ class FootholdChains:
         rules: the foothold rules.
         l: leg length [m].
         spacing: least spacing between the footholds a step tries [m].
+        relaxed: the rules a step falls back on where ``rules`` leave its stance foot no
+            admissible foothold (:meth:`PlannerConfig.relaxed_rules`), or None; the chains
+            that rank its candidates still follow ``rules``.
     """
 
-    def __init__(self, rules: FootholdRules, l: float, spacing: float):  # noqa: E741
+    def __init__(
+        self,
+        rules: FootholdRules,
+        l: float,  # noqa: E741
+        spacing: float,
+        relaxed: FootholdRules | None = None,
+    ):
         self.rules = rules
+        self.relaxed = relaxed
         self.l = l
         self.spacing = spacing
         self.lengths: dict[tuple, int] = {}  # chain lengths, see reach()
@@ -269,9 +279,22 @@ class FootholdChains:
         tries, in order: the first one within the candidate resolution of ``warm_x`` [m], then
         candidates at least ``spacing`` from those picked, in list order, up to ``need``.
         Candidates are ranked only until the picks are settled; the rest follow unranked, in
-        the order of :func:`candidate_footholds`."""
+        the order of :func:`candidate_footholds`.
+
+        Where ``rules`` give no candidate and ``relaxed`` rules do, those are ranked instead
+        and ``reason`` says so (it is empty otherwise when candidates exist)."""
         rules, l = self.rules, self.l  # noqa: E741
         cx, cy, why = candidate_footholds(tmap, stance, rules, l, theta_target, sigma_target)
+        if cx.size == 0 and self.relaxed is not None:
+            rx, ry, _ = candidate_footholds(
+                tmap, stance, self.relaxed, l, theta_target, sigma_target
+            )
+            if rx.size:
+                cx, cy = rx, ry
+                why = (
+                    f"riser margins relaxed to {self.relaxed.drop_margin:g} / "
+                    f"{self.relaxed.rise_margin:g} m/m: {why}"
+                )
         depth = min(int(depth), _CHAIN_DEPTH)
         # without a face or kink within reach every candidate continues alike (smooth ground)
         reach = stance[0] + (depth + 1) * rules.step_max + max(_LANDING_SLACK) + 2.0 * l
@@ -328,33 +351,42 @@ class FootholdChains:
         [m]."""
         return self.reach(tmap, x, depth) >= depth
 
-    def chain_footholds(self, tmap: TerrainMap, x: float) -> tuple[np.ndarray, str]:
+    def chain_footholds(
+        self, tmap: TerrainMap, x: float, relaxed: bool = False
+    ) -> tuple[np.ndarray, str]:
         """Admissible footholds from a stance foot at ``x`` [m] rounded to 1 mm, and why there are
-        none when empty."""
+        none when empty; with ``relaxed``, those of the relaxed rules where the rules give
+        none."""
         xr = round(float(x), 3)
-        key = (tmap.key, xr)
+        relaxed = relaxed and self.relaxed is not None
+        key = (tmap.key, xr, relaxed)
         hit = self.footholds.get(key)
         if hit is None:
-            cx, _, why = candidate_footholds(tmap, (xr, float(tmap.height(xr))), self.rules, self.l)
+            y = float(tmap.height(xr))
+            cx, _, why = candidate_footholds(tmap, (xr, y), self.rules, self.l)
+            if cx.size == 0 and relaxed:
+                rx, _, _ = candidate_footholds(tmap, (xr, y), self.relaxed, self.l)
+                cx = rx if rx.size else cx
             if len(self.footholds) > _MEMO_LIMIT:
                 self.footholds.clear()
             hit = self.footholds[key] = (cx, why)
         return hit
 
-    def reach(self, tmap: TerrainMap, x: float, depth: int) -> int:
+    def reach(self, tmap: TerrainMap, x: float, depth: int, relaxed: bool = False) -> int:
         """How many consecutive admissible footholds (at most ``depth``) a chain from a stance
-        foot at ``x`` [m] can have."""
+        foot at ``x`` [m] can have (``relaxed``: a step may take the relaxed rules' footholds
+        where the rules give none, as the search does)."""
         if depth <= 0:
             return 0
-        key = (tmap.key, round(float(x), 3), depth)
+        key = (tmap.key, round(float(x), 3), depth, relaxed)
         hit = self.lengths.get(key)
         if hit is not None:
             return hit
-        cx, _ = self.chain_footholds(tmap, x)
+        cx, _ = self.chain_footholds(tmap, x, relaxed)
         best = 0
         # every _CHAIN_STRIDE-th candidate first: on passable ground one of them continues
         for c in (*cx[:: max(1, _CHAIN_STRIDE)], *cx):
-            best = max(best, 1 + self.reach(tmap, float(c), depth - 1))
+            best = max(best, 1 + self.reach(tmap, float(c), depth - 1, relaxed))
             if best >= depth:
                 break
         if len(self.lengths) > _MEMO_LIMIT:
@@ -362,16 +394,16 @@ class FootholdChains:
         self.lengths[key] = best
         return best
 
-    def reach_break(self, tmap: TerrainMap, x: float, depth: int) -> str:
+    def reach_break(self, tmap: TerrainMap, x: float, depth: int, relaxed: bool = False) -> str:
         """Why the longest chain of footholds from ``x`` [m] ends (see :meth:`reach`)."""
         while True:
-            cx, why = self.chain_footholds(tmap, x)
+            cx, why = self.chain_footholds(tmap, x, relaxed)
             if cx.size == 0:
                 return f"from a stance foot at x = {x:.3f} m: {why}"
             if depth <= 0:
                 return ""  # the chain spans ``depth`` footholds: it does not end
             depth -= 1
-            x = float(max(cx, key=lambda c: self.reach(tmap, float(c), depth)))
+            x = float(max(cx, key=lambda c: self.reach(tmap, float(c), depth, relaxed)))
 
 
 @njit(cache=True, error_model="numpy")

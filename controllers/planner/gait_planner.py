@@ -64,7 +64,9 @@ class GaitPlanner:
         self._flat = TerrainMap("flat")
         # step problems solved during the current walk, and foothold chains (per terrain)
         self._solutions = StepSolutions()
-        self._chains = FootholdChains(config.rules(), self.params.l, config.candidate_spacing)
+        self._chains = FootholdChains(
+            config.rules(), self.params.l, config.candidate_spacing, config.relaxed_rules()
+        )
         self._gait_source: GaitPlanner = self  # the planner whose periodic gait steps pull to
 
     def relaxed(self, **changes: Any) -> GaitPlanner:

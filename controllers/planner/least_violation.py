@@ -88,7 +88,7 @@ def _least_violating_step(
 ) -> tuple[StepPlan, tuple[float, str]] | None:
     cfg, sm, l = search.config, search.model, search.params.l  # noqa: E741
     th_p, a0, slope, thd = start
-    cx, cy, order, _ = search._candidates(
+    cx, cy, order, why = search._candidates(
         stance, th_p, search.horizon - 1 - j, None, cfg.candidates
     )
     best: tuple[tuple[float, float], StepPlan, tuple[float, str]] | None = None
@@ -105,6 +105,7 @@ def _least_violating_step(
         if best is None or score < best[0]:
             c = BezierConstraint(ev["a"], th_p, q2m)
             step = StepPlan(j, search.P, c, thd, stance, fh, cfg.grid, ev["arm_theta"])
+            step.note = why  # the riser margins relaxed (else empty)
             best = (score, step, worst_violation(ev["groups"]))
     return None if best is None else (best[1], best[2])
 

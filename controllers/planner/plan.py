@@ -40,6 +40,8 @@ class StepPlan:
             on the step's Chebyshev grid (``theta_dot^2 = psi theta_dot_plus^2 + gam``, ``u``).
         arm_theta: phase at which the swing foot is planned to be armed [rad].
         P: the robot's parameter vector (``RobotParams.vector()``).
+        note: how the step's foothold departs from the planner's rules ("" if it does not;
+            e.g. relaxed riser margins, :attr:`PlannerConfig.relaxed_margin`).
     """
 
     def __init__(
@@ -59,6 +61,7 @@ class StepPlan:
         self.stance_foot = (float(stance_foot[0]), float(stance_foot[1]))
         self.foothold = (float(foothold[0]), float(foothold[1]))
         self.arm_theta = float(arm_theta)
+        self.note = ""
         th = rd.phase_grid(constraint.theta_plus, constraint.theta_minus, grid)
         ph, dph, ddph = constraint.derivatives(th)
         a, b, g = rd.reduced_coefficients(P, ph, th, dph, ddph)

@@ -138,12 +138,13 @@ class StepSearch:
                 feasible steps before it (``partial``) and the evaluations spent.
         """
         H = self.horizon
-        reach = self.chains.reach(self.tmap, stance[0], H)
+        # (with the relaxed rules where the rules leave a stance foot no foothold, as the
+        # steps' candidates)
+        reach = self.chains.reach(self.tmap, stance[0], H, relaxed=True)
         try:
             if reach < H:  # no chain of admissible footholds that long: no search can succeed
-                raise PlanningError(
-                    reach, "foothold", self.chains.reach_break(self.tmap, stance[0], H)
-                )
+                why = self.chains.reach_break(self.tmap, stance[0], H, relaxed=True)
+                raise PlanningError(reach, "foothold", why)
             return self._steps(0, start, stance)
         except PlanningError as exc:
             exc.partial = list(self.partial)
@@ -269,7 +270,9 @@ class StepSearch:
                 self.budget += 1
             if ok:
                 c = BezierConstraint(ev["a"], th_p, q2m)
-                yield StepPlan(j, self.P, c, thd, stance, fh, cfg.grid, ev["arm_theta"])
+                step = StepPlan(j, self.P, c, thd, stance, fh, cfg.grid, ev["arm_theta"])
+                step.note = why  # the riser margins relaxed (candidates exist: else empty)
+                yield step
                 continue
             worst, name = worst_violation(ev["groups"])
             best_fail = max(best_fail, (worst, name, f"foothold x = {fh[0]:.3f} m"))
@@ -278,7 +281,7 @@ class StepSearch:
         yield PlanningError(
             j,
             best_fail[1] or "search budget exhausted",
-            "; ".join(filter(None, (best_fail[2], note))),
+            "; ".join(filter(None, (best_fail[2], note, why))),
         )
 
     def _candidates(

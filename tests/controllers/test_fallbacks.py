@@ -100,3 +100,19 @@ def test_degradation_order_is_configurable_and_validated():
         ControllerConfig(relaxed_feedback="lqr")
     with pytest.raises(ValueError, match="torque_fraction"):  # checked by the robot's planner
         TransverseController("paper", "flat", {"fallbacks": [{"torque_fraction": 1.5}]})
+
+
+def test_a_stance_foot_between_foothold_windows_walks_on_with_relaxed_riser_margins(gait):
+    """Two 3 cm stairs down, the first riser 0.10 m ahead: with the full riser margins no
+    problem has a foothold at the first step and the controller goes limp (zero input); the
+    paper robot's planner relaxes the margins for that step (recorded in the step's reason)
+    and the robot walks down both stairs."""
+    stairs = Terrain.stairs([0.10, 0.32], [-0.03, -0.03])
+    plain, _ = walk(stairs, gait, ControllerConfig(), {"relaxed_margin": 1.0}, duration=4.0)
+    assert plain["records"][0].fallback == "zero input"
+    out, ctrl = walk(stairs, gait, ControllerConfig(), duration=4.0)
+    first = out["records"][0]
+    assert first.fallback is None and "riser margins relaxed" in first.reason
+    assert out["failure"] is None and len(out["impacts"]) >= 5
+    assert all(r.fallback != "zero input" for r in out["records"])
+    assert ctrl._stance[1] == pytest.approx(-0.06)  # on the lower tread

@@ -169,3 +169,40 @@ def test_the_planner_touchdown_configuration_is_the_model_one():
         fx = 0.32 * (math.sin(q2) - math.sin(q2 - q1))
         fy = 0.32 * (math.cos(q2) - math.cos(q2 - q1))
         assert (fx, fy) == pytest.approx((dx, dh), abs=1e-14)
+
+
+def test_relaxed_margins_apply_only_where_the_rules_leave_no_foothold():
+    """On the paper's stairs a stance foot 0.29-0.31 m out has no admissible foothold: too far
+    for a step before the riser at 0.40 m, too near for one past its drop margin. The relaxed
+    rules (half the margins) give it footholds; everywhere else the candidates are the rules'
+    own, and the chains that rank candidates keep the full margins."""
+    cfg = PlannerConfig.for_robot("paper")
+    assert cfg.relaxed_margin == 0.5
+    rules, relaxed = cfg.rules(), cfg.relaxed_rules()
+    assert relaxed.drop_margin == 0.5 * rules.drop_margin
+    assert relaxed.rise_margin == 0.5 * rules.rise_margin
+    assert PlannerConfig.for_robot("paper", relaxed_margin=1.0).relaxed_rules() is None
+    tmap = TerrainMap(Terrain.stairs([0.40, 0.62], [-0.03, -0.03]))
+    chains = FootholdChains(rules, 0.32, cfg.candidate_spacing, relaxed)
+    gap = (0.30, 0.0)
+    nominal, _, why = candidate_footholds(tmap, gap, rules, 0.32)
+    assert nominal.size == 0 and "no admissible foothold" in why
+    cx, _, picks, why = chains.ranked(tmap, gap, 0.2, -0.2, 3, None, 4)
+    ref, _, _ = candidate_footholds(tmap, gap, relaxed, 0.32)
+    assert np.array_equal(np.sort(cx), np.sort(ref)) and picks
+    assert why.startswith("riser margins relaxed to 2 / 2 m/m: no admissible foothold")
+    assert np.all(cx >= 0.40 + rules.edge_margin + relaxed.drop_margin * 0.03 - 1e-9)
+    # the ranking's chains keep the full margins: the gap is still a dead end for them ...
+    assert chains.reach(tmap, 0.30, 1) == 0 and not chains.chain(tmap, 0.30, 1)
+    # ... but not for the search's feasibility check, which may take relaxed steps
+    assert chains.reach(tmap, 0.30, 3, relaxed=True) == 3
+    assert chains.reach_break(tmap, 0.30, 3, relaxed=True) == ""
+    for x in (0.0, 0.2, 0.35, 0.45):  # a foothold exists: the rules' candidates, no note
+        stance = (x, float(tmap.height(x)))
+        cx, _, _, why = chains.ranked(tmap, stance, 0.2, -0.2, 3, None, 4)
+        ref, _, _ = candidate_footholds(tmap, stance, rules, 0.32, 0.2, -0.2)
+        assert why == "" and np.array_equal(np.sort(cx), np.sort(ref))
+    with pytest.raises(ValueError, match="relaxed_margin"):
+        PlannerConfig(relaxed_margin=1.5)
+    with pytest.raises(ValueError, match="relaxed_margin"):
+        PlannerConfig(relaxed_margin=-0.1)

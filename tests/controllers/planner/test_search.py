@@ -129,3 +129,24 @@ def test_pairs_first_finds_the_climb_that_a_foothold_before_the_riser_hides():
     np.testing.assert_allclose(plan.footholds, whole.footholds, atol=1e-9)
     assert plan[3].foothold[1] == pytest.approx(0.014)  # on top of the riser
     assert plan[2].thetadot_minus < 0.8 * plan[1].thetadot_minus  # slowed down before it
+
+
+def test_a_stance_foot_between_foothold_windows_plans_with_relaxed_riser_margins(planners):
+    """Two 3 cm stairs down, the first riser 0.10 m ahead of the stance foot: with the full
+    riser margins no foothold lies within the step bounds (before the riser is shorter than
+    ``step_min``, past its margin longer than ``step_max``) and planning fails at step 0. The
+    paper robot's planner halves the margins for that step alone, says so in the step's
+    note, and plans down both stairs."""
+    stairs = Terrain.stairs([0.10, 0.32], [-0.03, -0.03])
+    gait = planners["paper"].periodic_gait()
+    full = GaitPlanner("paper", {"relaxed_margin": 1.0})
+    with pytest.raises(PlanningError, match="no admissible foothold") as err:
+        full.plan(stairs, (gait.q, gait.qd), (0.0, 0.0), horizon=3)
+    assert err.value.step == 0
+    plan = GaitPlanner("paper").plan(stairs, (gait.q, gait.qd), (0.0, 0.0), horizon=3)
+    assert len(plan) == 3
+    assert plan[0].note.startswith("riser margins relaxed to 2 / 2 m/m")
+    assert plan[0].foothold[0] >= 0.10 + 0.02 + 2.0 * 0.03 - 1e-9
+    assert plan[0].foothold[1] == pytest.approx(-0.03)
+    assert all(s.note == "" for s in plan.steps[1:])  # the rules' footholds from there on
+    assert plan[2].foothold[1] == pytest.approx(-0.06)
