@@ -330,6 +330,8 @@ class TransverseController:
             self.planner = planner
         else:
             self.planner = GaitPlanner(self.robot, planner)
+        self._configured = self.planner  # the planner before adjust_planner's changes
+        self._adjustment: tuple = ()
         self.records: list[StepRecord] = []
         self.plan: Plan | None = None
         self.solution: HorizonSolution | None = None
@@ -353,11 +355,32 @@ class TransverseController:
         one, say): a planner with the same settings for it; the current step's gains stay
         until then."""
         robot = as_params(robot)
-        self.planner = GaitPlanner(robot, self.planner.config)
+        self._configured = GaitPlanner(robot, self._configured.config)
+        self.planner = self._configured
+        if self._adjustment:
+            self.planner = self._configured.relaxed(**dict(self._adjustment))
         self.robot = robot
         self.P = robot.vector()
         self._torque_gain = float(model.input_gain(self.P))
         self._relaxed.clear()
+
+    def adjust_planner(self, **changes: float) -> None:
+        """Plan with the planner settings ``changes`` (fields of :class:`PlannerConfig`, e.g.
+        ``target_speed`` or ``foothold_shift``) instead of the configured ones from the next
+        planning call on (the next touchdown, or a replan within the step); none: the
+        configured planner again. Steps still pull towards the configured planner's periodic
+        gait, and the degradations relax the adjusted settings.
+
+        Raises:
+            ValueError: an unknown field or a value out of its range.
+        """
+        key = tuple(sorted(changes.items()))
+        if key == self._adjustment:
+            return
+        base = self._configured
+        self.planner = base.relaxed(**changes) if key else base
+        self._adjustment = key
+        self._relaxed.clear()  # the degradations' planners derive from the adjusted one
 
     # ------------------------------------------------------------------ planning
     def reset(

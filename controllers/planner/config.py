@@ -113,6 +113,10 @@ class PlannerConfig:
             next one before any step alone (a foothold from which no next step exists, say
             too close before a riser, is then searched beyond only as a last resort); 0
             tries each foothold's pair and then the step alone before the next foothold.
+        foothold_shift: moves the preferred foothold of every step by about this much [m]
+            (the touchdown angle the candidates are ranked towards turns by ``shift / (2 l cos
+            theta-)``); 0 for the periodic gait's. A per-footstep lever for a learned policy
+            (``agents.footstep.FootstepWrapper``); within +-0.1 m.
         candidates: footholds tried per step before giving up.
         candidate_spacing: least spacing between the footholds tried [m].
 
@@ -167,6 +171,7 @@ class PlannerConfig:
     lookahead_rise: float = 0.002
     energy_horizon: int = 0
     pairs_first: int = 0
+    foothold_shift: float = 0.0
     candidates: int = 4
     candidate_spacing: float = 0.01
 
@@ -221,6 +226,10 @@ class PlannerConfig:
         if not self.torque_fraction <= 1:
             raise ValueError(
                 f"PlannerConfig.torque_fraction = {self.torque_fraction}; allowed: <= 1"
+            )
+        if not abs(self.foothold_shift) <= 0.1:
+            raise ValueError(
+                f"PlannerConfig.foothold_shift = {self.foothold_shift}; allowed: [-0.1, 0.1] m"
             )
         if not self.relaxed_margin <= 1:
             raise ValueError(

@@ -109,6 +109,10 @@ class StepSearch:
         self.model = StepEvaluator(params, config, tmap)
         self.model.ref = gait_reference(gait)
         self.prev = list(previous_plan.steps) if previous_plan is not None else []
+        # the previous plan's footholds are tried first, unless the preferred foothold moved
+        self.warm_footholds = (
+            previous_plan is None or previous_plan.config.foothold_shift == config.foothold_shift
+        )
         self.horizon = horizon
         self.budget = 3 * horizon + 2 * config.candidates  # step solves left
         self.may_stall = previous_plan is not None
@@ -194,7 +198,7 @@ class StepSearch:
             stance,
             th_p,
             self.horizon - 1 - j,
-            warm[0].foothold[0] if warm else None,
+            warm[0].foothold[0] if warm and self.warm_footholds else None,
             cfg.candidates,
         )
         if cx.size == 0:
@@ -298,7 +302,7 @@ class StepSearch:
             self.tmap,
             stance,
             self._theta_target(theta_plus),
-            self.gait.step.theta_plus,
+            self.gait.step.theta_plus - self._shift_angle(),  # the swing leg's, at touchdown
             depth,
             warm_x,
             need,
@@ -320,9 +324,15 @@ class StepSearch:
     def _theta_target(self, theta_plus: float) -> float:
         """Preferred touchdown ``q2`` for a step starting at ``theta_plus``: the gait's, moved by
         half the start's deviation (keeps the phase range near the gait's; the deviation of
-        ``theta_plus`` halves from step to step on flat ground)."""
+        ``theta_plus`` halves from step to step on flat ground), and turned by
+        ``foothold_shift`` (a step ``2 l sin q2`` long at full leg length)."""
         st = self.gait.step
-        return st.theta_minus + 0.5 * (theta_plus - st.theta_plus)
+        return st.theta_minus + 0.5 * (theta_plus - st.theta_plus) + self._shift_angle()
+
+    def _shift_angle(self) -> float:
+        """The touchdown angle ``foothold_shift`` turns the preferred foothold by [rad]."""
+        st = self.gait.step
+        return self.config.foothold_shift / (2.0 * self.params.l * math.cos(st.theta_minus))
 
     def _next_template(self, fh, q1m, q2m) -> tuple[FixedStep, np.ndarray] | None:
         """The step after a step ending on ``fh`` (its start speed left open), or None."""

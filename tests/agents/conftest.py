@@ -24,11 +24,13 @@ def smoke_config(path: Path, timesteps: int | None = None) -> AgentConfig:
     whose footstep planning dominates their cost. A critic warm-up lasts a quarter of it.
     """
     cfg = load_config(path)
-    small = cfg.is_residual
+    # per-footstep agents: one agent step walks a whole footstep (about 110 env steps)
+    footstep = any(cls.__name__ == "FootstepWrapper" for cls, _ in cfg.wrapper_specs())
+    small = cfg.is_residual or footstep
     limit = SMOKE_EPISODE_STEPS // 2 if small else SMOKE_EPISODE_STEPS
     env_kwargs = {**cfg.env_kwargs, "max_episode_steps": limit}
     if cfg.algo == "ppo":
-        n = timesteps or (128 if small else 2048)
+        n = timesteps or (16 if footstep else 128 if small else 2048)
         hyper = {"n_envs": 2, "n_steps": n // 4, "batch_size": min(64, n // 2), "n_epochs": 2}
     else:
         n = timesteps or (128 if small else 1200)

@@ -430,3 +430,27 @@ def test_the_tube_is_left_alone_in_fixed_plan_mode_and_when_switched_off():
 def test_bad_tube_settings_are_clear_errors(field, value, match):
     with pytest.raises(ValueError, match=match):
         ControllerConfig(**{field: value})
+
+
+def test_adjusted_planner_settings_apply_from_the_next_plan_and_survive_a_robot_switch():
+    """``adjust_planner`` plans with changed settings from the next planning call on (the
+    degradations relax those), an unchanged adjustment keeps the planner, none restores the
+    configured one, and switching to an identified robot keeps the adjustment."""
+    ctrl = TransverseController("paper", "flat")
+    configured = ctrl.planner
+    ctrl.adjust_planner(foothold_shift=0.02, target_speed=0.2)
+    adjusted = ctrl.planner
+    assert adjusted.config.foothold_shift == 0.02 and adjusted.config.target_speed == 0.2
+    assert adjusted.config.order == configured.config.order
+    relaxed = ctrl._planner_for((("torque_fraction", 1.0),))
+    assert relaxed.config.foothold_shift == 0.02 and relaxed.config.torque_fraction == 1.0
+    ctrl.adjust_planner(target_speed=0.2, foothold_shift=0.02)
+    assert ctrl.planner is adjusted
+    ctrl.set_robot(ctrl.robot.replace(l=0.33))
+    assert ctrl.planner.params.l == 0.33 and ctrl.planner.config == adjusted.config
+    ctrl.adjust_planner()
+    assert ctrl.planner.config == configured.config and ctrl.planner.params.l == 0.33
+    with pytest.raises(ValueError, match="foothold_shift"):
+        ctrl.adjust_planner(foothold_shift=1.0)
+    with pytest.raises(ValueError, match="no_such"):
+        ctrl.adjust_planner(no_such=1.0)

@@ -150,3 +150,26 @@ def test_a_stance_foot_between_foothold_windows_plans_with_relaxed_riser_margins
     assert plan[0].foothold[1] == pytest.approx(-0.03)
     assert all(s.note == "" for s in plan.steps[1:])  # the rules' footholds from there on
     assert plan[2].foothold[1] == pytest.approx(-0.06)
+
+
+def test_foothold_shift_moves_every_preferred_foothold(planners):
+    """On level ground the periodic gait's footholds are 0.15 m apart; ``foothold_shift``
+    moves each step's by about the shift (the touchdown angle the candidates are ranked
+    towards turns by ``shift / (2 l cos theta-)``), and a previous plan's footholds are not
+    tried first once the shift has changed."""
+    gait = planners["paper"].periodic_gait()
+    start = (gait.q, gait.qd)
+    lengths = {}
+    for shift in (-0.03, 0.0, 0.03):
+        plan = GaitPlanner("paper", {"foothold_shift": shift}).plan("flat", start, (0.0, 0.0), 3)
+        lengths[shift] = np.diff([0.0, *(s.foothold[0] for s in plan.steps)])
+    np.testing.assert_allclose(lengths[0.0], 0.15, atol=0.002)
+    np.testing.assert_allclose(lengths[0.03] - lengths[0.0], 0.03, atol=0.003)
+    np.testing.assert_allclose(lengths[0.0] - lengths[-0.03], 0.03, atol=0.003)
+    base = GaitPlanner("paper").plan("flat", start, (0.0, 0.0), 3)
+    moved = GaitPlanner("paper", {"foothold_shift": 0.03}).plan(
+        "flat", start, (0.0, 0.0), 3, previous_plan=base
+    )
+    assert moved[0].foothold[0] == pytest.approx(base[0].foothold[0] + 0.03, abs=0.003)
+    with pytest.raises(ValueError, match=r"foothold_shift = 0.2; allowed: \[-0.1, 0.1\] m"):
+        GaitPlanner("paper", {"foothold_shift": 0.2})
