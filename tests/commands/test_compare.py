@@ -14,14 +14,15 @@ def test_compare_dry_run_lists_every_row(capsys):
     assert main(["compare", "--dry-run"]) == 0
     table = capsys.readouterr().out
     lines = [ln for ln in table.splitlines() if ln.startswith("| ") and "---" not in ln][1:]
-    # 4 terrain settings x (3 baselines + 4 agents), and the 2 residual "_zero" agents on
-    # rough-hard
-    assert len(lines) == 4 * 7 + 2
+    # 4 terrain settings x (3 baselines + 4 agents), and on rough-hard the 2 residual "_zero"
+    # agents and the per-footstep one
+    assert len(lines) == 4 * 7 + 3
     assert "roughwalk train" in table and "--env-kwargs difficulty=2.0" in table
+    assert "| rough-hard | per-footstep PPO | 0 |" in table
     assert main(["compare", "--dry-run", "--terrains", "stairs", "rough-hard"]) == 0
     table = capsys.readouterr().out
     lines = [ln for ln in table.splitlines() if ln.startswith("| ") and "---" not in ln][1:]
-    assert len(lines) == 2 * 7 + 2 and {ln.split("|")[1].strip() for ln in lines} == {
+    assert len(lines) == 2 * 7 + 3 and {ln.split("|")[1].strip() for ln in lines} == {
         "stairs",
         "rough-hard",
     }
