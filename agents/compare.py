@@ -98,8 +98,7 @@ def agent_label(cfg: AgentConfig) -> str:
     """``PPO``, ``residual SAC``, ``per-footstep PPO``, ``residual PPO (zero init)`` (the recipe of
     ``residual_init: zero``), ...: one label per kind of agent, the group its training seeds
     and settings are pooled in across seeds."""
-    footstep = any(cls.__name__ == "FootstepWrapper" for cls, _ in cfg.wrapper_specs())
-    kind = "residual " if cfg.is_residual else "per-footstep " if footstep else ""
+    kind = "residual " if cfg.is_residual else "per-footstep " if cfg.is_footstep else ""
     label = kind + cfg.algo.upper()
     return label + (" (zero init)" if cfg.residual_init == "zero" else "")
 

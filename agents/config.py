@@ -52,6 +52,7 @@ import numpy as np
 import yaml
 
 import envs  # noqa: F401  (registers the roughwalk ids)
+from agents.footstep import FootstepWrapper
 from agents.hyperparams import OFF_POLICY, RUN_OPTION_DEFAULTS, RUN_OPTIONS, check_hyperparams
 from agents.residual import ResidualWrapper
 from envs.config_util import read_yaml_mapping
@@ -313,6 +314,12 @@ class AgentConfig:
     def is_residual(self) -> bool:
         """Whether the agent learns a residual on a base policy (a ``ResidualWrapper``)."""
         return any(issubclass(cls, ResidualWrapper) for cls, _ in self.wrapper_specs())
+
+    @property
+    def is_footstep(self) -> bool:
+        """Whether one agent step is a footstep of the reference planner (a
+        ``FootstepWrapper``)."""
+        return any(issubclass(cls, FootstepWrapper) for cls, _ in self.wrapper_specs())
 
     def algo_kwargs(self) -> dict[str, Any]:
         """Keyword arguments for the algorithm's constructor (schedules and noise resolved)."""

@@ -52,16 +52,17 @@ class FootstepWrapper(gym.Wrapper, gym.utils.RecordConstructorArgs):
 
     Args:
         env: a roughwalk env observing sensors (``gym.make(id)``, its default).
-        adjust: the planner settings the action sets, ``{field of PlannerConfig: half-range}``
-            (positive, in the field's units); action ``a_i`` gives ``configured + half_range *
-            a_i``, clipped to the field's allowed range. Default :data:`DEFAULT_ADJUST`.
+        adjust: the planner settings the action sets, ``{setting of ADJUSTABLE: half-range}``
+            (positive, in the setting's units); action ``a_i`` gives ``configured + half_range *
+            a_i``, clipped to the setting's range in :data:`ADJUSTABLE`. Default
+            :data:`DEFAULT_ADJUST`.
         observe_state: append the controller's state estimate (``q1, q2, q1d, q2d``, stance
             leg) to the observation.
         base_kwargs: options of the reference policy (``agents.policies.make_baseline_policy``,
             e.g. ``planner`` settings).
 
     Raises:
-        ValueError: an unknown or non-float planner field, a half-range that is not finite and
+        ValueError: a setting not in :data:`ADJUSTABLE`, a half-range that is not finite and
             positive, or an env whose action or observation space is not a ``Box``.
     """
 

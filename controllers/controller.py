@@ -356,13 +356,10 @@ class TransverseController:
         until then."""
         robot = as_params(robot)
         self._configured = GaitPlanner(robot, self._configured.config)
-        self.planner = self._configured
-        if self._adjustment:
-            self.planner = self._configured.relaxed(**dict(self._adjustment))
+        self._use_adjustment(self._adjustment)
         self.robot = robot
         self.P = robot.vector()
         self._torque_gain = float(model.input_gain(self.P))
-        self._relaxed.clear()
 
     def adjust_planner(self, **changes: float) -> None:
         """Plan with the planner settings ``changes`` (fields of :class:`PlannerConfig`, e.g.
@@ -375,12 +372,16 @@ class TransverseController:
             ValueError: an unknown field or a value out of its range.
         """
         key = tuple(sorted(changes.items()))
-        if key == self._adjustment:
-            return
+        if key != self._adjustment:
+            self._use_adjustment(key)
+
+    def _use_adjustment(self, adjustment: tuple) -> None:
+        """Plan with the configured planner changed by ``adjustment`` (sorted ``(field,
+        value)`` pairs; a bad one raises before anything changes)."""
         base = self._configured
-        self.planner = base.relaxed(**changes) if key else base
-        self._adjustment = key
-        self._relaxed.clear()  # the degradations' planners derive from the adjusted one
+        self.planner = base.relaxed(**dict(adjustment)) if adjustment else base
+        self._adjustment = adjustment
+        self._relaxed.clear()  # the degradations' planners derive from this one
 
     # ------------------------------------------------------------------ planning
     def reset(

@@ -284,17 +284,12 @@ class FootholdChains:
         Where ``rules`` give no candidate and ``relaxed`` rules do, those are ranked instead
         and ``reason`` says so (it is empty otherwise when candidates exist)."""
         rules, l = self.rules, self.l  # noqa: E741
-        cx, cy, why = candidate_footholds(tmap, stance, rules, l, theta_target, sigma_target)
-        if cx.size == 0 and self.relaxed is not None:
-            rx, ry, _ = candidate_footholds(
-                tmap, stance, self.relaxed, l, theta_target, sigma_target
+        cx, cy, why, relaxed = self._admissible(tmap, stance, True, theta_target, sigma_target)
+        if relaxed:
+            why = (
+                f"riser margins relaxed to {self.relaxed.drop_margin:g} / "
+                f"{self.relaxed.rise_margin:g} m/m: {why}"
             )
-            if rx.size:
-                cx, cy = rx, ry
-                why = (
-                    f"riser margins relaxed to {self.relaxed.drop_margin:g} / "
-                    f"{self.relaxed.rise_margin:g} m/m: {why}"
-                )
         depth = min(int(depth), _CHAIN_DEPTH)
         # without a face or kink within reach every candidate continues alike (smooth ground)
         reach = stance[0] + (depth + 1) * rules.step_max + max(_LANDING_SLACK) + 2.0 * l
@@ -351,6 +346,25 @@ class FootholdChains:
         [m]."""
         return self.reach(tmap, x, depth) >= depth
 
+    def _admissible(
+        self,
+        tmap: TerrainMap,
+        stance: tuple[float, float],
+        relaxed: bool,
+        theta_target: float | None = None,
+        sigma_target: float | None = None,
+    ) -> tuple[np.ndarray, np.ndarray, str, bool]:
+        """:func:`candidate_footholds` under the rules, or, with ``relaxed``, under the
+        relaxed rules where the rules give none; the last item says whether those were used
+        (``reason`` is then the rules' one)."""
+        args = (self.l, theta_target, sigma_target)
+        cx, cy, why = candidate_footholds(tmap, stance, self.rules, *args)
+        if cx.size == 0 and relaxed and self.relaxed is not None:
+            rx, ry, _ = candidate_footholds(tmap, stance, self.relaxed, *args)
+            if rx.size:
+                return rx, ry, why, True
+        return cx, cy, why, False
+
     def chain_footholds(
         self, tmap: TerrainMap, x: float, relaxed: bool = False
     ) -> tuple[np.ndarray, str]:
@@ -358,15 +372,10 @@ class FootholdChains:
         none when empty; with ``relaxed``, those of the relaxed rules where the rules give
         none."""
         xr = round(float(x), 3)
-        relaxed = relaxed and self.relaxed is not None
-        key = (tmap.key, xr, relaxed)
+        key = (tmap.key, xr, relaxed and self.relaxed is not None)
         hit = self.footholds.get(key)
         if hit is None:
-            y = float(tmap.height(xr))
-            cx, _, why = candidate_footholds(tmap, (xr, y), self.rules, self.l)
-            if cx.size == 0 and relaxed:
-                rx, _, _ = candidate_footholds(tmap, (xr, y), self.relaxed, self.l)
-                cx = rx if rx.size else cx
+            cx, _, why, _ = self._admissible(tmap, (xr, float(tmap.height(xr))), relaxed)
             if len(self.footholds) > _MEMO_LIMIT:
                 self.footholds.clear()
             hit = self.footholds[key] = (cx, why)
@@ -378,6 +387,7 @@ class FootholdChains:
         where the rules give none, as the search does)."""
         if depth <= 0:
             return 0
+        relaxed = relaxed and self.relaxed is not None  # without relaxed rules: the same chains
         key = (tmap.key, round(float(x), 3), depth, relaxed)
         hit = self.lengths.get(key)
         if hit is not None:

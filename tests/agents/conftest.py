@@ -25,7 +25,7 @@ def smoke_config(path: Path, timesteps: int | None = None) -> AgentConfig:
     """
     cfg = load_config(path)
     # per-footstep agents: one agent step walks a whole footstep (about 110 env steps)
-    footstep = any(cls.__name__ == "FootstepWrapper" for cls, _ in cfg.wrapper_specs())
+    footstep = cfg.is_footstep
     small = cfg.is_residual or footstep
     limit = SMOKE_EPISODE_STEPS // 2 if small else SMOKE_EPISODE_STEPS
     env_kwargs = {**cfg.env_kwargs, "max_episode_steps": limit}

@@ -48,11 +48,11 @@ def test_shipped_configs_cover_both_algorithms_both_variants_and_every_terrain()
         specs = {cls.__name__: kw for cls, kw in c.wrapper_specs()}
         # a real training budget, not a smoke test's (agent steps: footsteps for the
         # per-footstep agents, about 110 control periods each)
-        assert c.n_timesteps >= (10_000 if "FootstepWrapper" in specs else 50_000)
+        assert c.n_timesteps >= (10_000 if c.is_footstep else 50_000)
         # no agent reads the raw encoders alone: each observes the sensor-based state estimate
         if c.is_residual:
             assert specs["ResidualWrapper"]["observe_state"] is True
-        elif "FootstepWrapper" in specs:
+        elif c.is_footstep:
             assert specs["FootstepWrapper"]["observe_state"] is True
         else:
             assert "EstimatedStateObservation" in specs
