@@ -216,7 +216,8 @@ def run_episode(
     env: gym.Env, policy: Policy, seed: int, max_steps: int | None = None
 ) -> EpisodeResult:
     """Roll ``policy`` out on ``env`` from ``reset(seed=seed)`` until the episode ends (or
-    after ``max_steps`` steps, if given)."""
+    after ``max_steps`` control steps, if given; an agent step of
+    :class:`agents.footstep.FootstepWrapper` counts its ``info["ticks"]``)."""
     mass, g, dt = _robot(env)
     obs, info = env.reset(seed=seed)
     policy.reset()
@@ -228,7 +229,7 @@ def run_episode(
         obs, reward, terminated, truncated, info = env.step(policy(obs))
         total_return += float(reward)
         work += float(info.get("motor_work", 0.0))
-        steps += 1
+        steps += int(info.get("ticks", 1))  # control periods (a footstep wrapper's many)
         if max_steps is not None and steps >= max_steps:
             break
     failure = info.get("failure") or None

@@ -7,7 +7,9 @@ the preferred foothold moved by up to 3 cm, the walking speed aimed at, the torq
 and the wrapper then runs the reference controller tick by tick until the next touchdown (or
 the episode's end). The reward is the sum of the ticks' rewards; ``info["ticks"]`` says how
 many control periods the footstep took (for a discount per tick, ``gamma ** ticks``; SB3's
-algorithms discount per agent step). A zero action is the reference controller exactly.
+algorithms discount per agent step); the env's per-step entries of ``info`` cover the whole
+footstep (``motor_work`` and ``impacts`` summed, ``push`` the last push in it), the others are
+the last tick's. A zero action is the reference controller exactly.
 
 This is the option-style residual of the residual-RL literature applied to the planner's
 choices (where the per-tick torque residual of :class:`agents.residual.ResidualWrapper` acts
@@ -151,20 +153,26 @@ class FootstepWrapper(gym.Wrapper, gym.utils.RecordConstructorArgs):
         """Set the planner for the next footstep from ``action``, then walk to the next
         touchdown (at most :data:`MAX_TICKS` control periods) with the reference controller."""
         self.controller.adjust_planner(**self.settings(action))
-        obs, total, ticks = self._obs, 0.0, 0
+        obs, total, ticks, work, impacts, push = self._obs, 0.0, 0, 0.0, 0, None
         terminated = truncated = False
         info: dict[str, Any] = {}
         while ticks < MAX_TICKS:
             obs, reward, terminated, truncated, info = self.env.step(self.policy(obs))
             total += float(reward)
             ticks += 1
+            work += float(info.get("motor_work", 0.0))
+            impacts += int(info.get("impacts", 0))
+            push = info.get("push", push)
             footsteps = int(info.get("footsteps", self._footsteps))
             if terminated or truncated or footsteps > self._footsteps:
                 self._footsteps = footsteps
                 break
         self._obs = obs
         info = dict(info)
-        info["ticks"] = ticks
+        # the env's per-step entries, over the footstep's control periods
+        info.update(ticks=ticks, motor_work=work, impacts=impacts)
+        if push is not None:
+            info["push"] = push
         config = self.controller.planner.config
         info["planner_settings"] = {k: float(getattr(config, k)) for k in self.adjust}
         return self._observe(obs), total, terminated, truncated, info

@@ -18,11 +18,13 @@ def test_a_zero_action_is_the_reference_controller_exactly():
     reference policy alone: the same ticks, return and final state."""
     env = FootstepWrapper(gym.make(STAIRS))
     obs, _ = env.reset(seed=1000003)
-    total, ticks, steps, done = 0.0, 0, 0, False
+    total, ticks, steps, work, impacts, done = 0.0, 0, 0, 0.0, 0, False
     while not done:
         obs, r, term, trunc, info = env.step(np.zeros(env.action_space.shape))
         total += r
         ticks += info["ticks"]
+        work += info["motor_work"]
+        impacts += info["impacts"]
         steps += 1
         done = term or trunc
     assert info["planner_settings"] == {
@@ -32,14 +34,17 @@ def test_a_zero_action_is_the_reference_controller_exactly():
     ref = make_baseline_policy("reference", plain)
     o, _ = plain.reset(seed=1000003)
     ref.reset()
-    ref_total, ref_ticks, done = 0.0, 0, False
+    ref_total, ref_ticks, ref_work, done = 0.0, 0, 0.0, False
     while not done:
         o, r, term2, trunc2, info2 = plain.step(ref(o))
         ref_total += r
+        ref_work += info2["motor_work"]
         ref_ticks += 1
         done = term2 or trunc2
     assert (term, trunc, ticks) == (term2, trunc2, ref_ticks)
     assert total == pytest.approx(ref_total, rel=1e-12)
+    # the per-step info entries cover the whole footstep
+    assert work == pytest.approx(ref_work, rel=1e-12) and impacts == info2["footsteps"]
     np.testing.assert_array_equal(info["state"], info2["state"])
     assert steps == info2["footsteps"] + 1  # one decision per stance, the last one cut short
 
@@ -100,3 +105,24 @@ def test_bad_actions_are_named():
         env.step([0.0, 0.0])
     with pytest.raises(ValueError, match="footstep action must be 3 finite numbers"):
         env.step([0.0, np.nan, 0.0])
+
+
+def test_evaluation_counts_a_footsteps_control_periods():
+    """``agents.evaluate.run_episode`` on the wrapper (zero actions) reports the reference's
+    duration, speed and motor work, not per-agent-step ones."""
+    from agents.evaluate import run_episode
+
+    class Zero:
+        def reset(self):
+            pass
+
+        def __call__(self, obs):
+            return np.zeros(3, dtype=np.float32)
+
+    wrapped = run_episode(FootstepWrapper(gym.make(FLAT)), Zero(), seed=1000001)
+    plain = gym.make(FLAT)
+    ref = run_episode(plain, make_baseline_policy("reference", plain), seed=1000001)
+    assert (wrapped.steps, wrapped.duration) == (ref.steps, ref.duration)
+    assert wrapped.speed == pytest.approx(ref.speed, rel=1e-12)
+    assert wrapped.motor_work == pytest.approx(ref.motor_work, rel=1e-12)
+    assert wrapped.footsteps == ref.footsteps and wrapped.success == ref.success
