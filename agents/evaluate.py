@@ -90,6 +90,9 @@ class EpisodeResult:
         V_ratio_median, V_ratio_max: median and largest ``V_end / V_start`` over those
             footsteps (None without any).
         V_ratio_below_1: fraction of those footsteps with ``V_end / V_start < 1``.
+        foot_error_max: largest ``|estimated - true|`` stance-foot x over the touchdowns [m]
+            (the policy's ``stance_foot`` against ``info["stance_foot"]``); None for a policy
+            that does not estimate it.
     """
 
     seed: int
@@ -107,6 +110,7 @@ class EpisodeResult:
     V_ratio_median: float | None = None
     V_ratio_max: float | None = None
     V_ratio_below_1: float | None = None
+    foot_error_max: float | None = None
 
 
 @dataclass
@@ -225,8 +229,16 @@ def run_episode(
     steps = 0
     work = 0.0
     terminated = truncated = False
+    estimates = hasattr(policy, "stance_foot")
+    foot, foot_error = None, None
     while not (terminated or truncated):
-        obs, reward, terminated, truncated, info = env.step(policy(obs))
+        action = policy(obs)
+        true = info.get("stance_foot")
+        if estimates and true is not None and (foot is None or true[0] != foot):
+            foot = true[0]  # a touchdown (or the start): the policy has located it by now
+            err = abs(float(policy.stance_foot[0]) - float(foot))
+            foot_error = err if foot_error is None else max(foot_error, err)
+        obs, reward, terminated, truncated, info = env.step(action)
         total_return += float(reward)
         work += float(info.get("motor_work", 0.0))
         steps += int(info.get("ticks", 1))  # control periods (a footstep wrapper's many)
@@ -251,6 +263,7 @@ def run_episode(
         episode_return=total_return,
         certificate=cert,
         **ratio_summary(ratios),
+        foot_error_max=foot_error,
     )
 
 

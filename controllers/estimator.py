@@ -192,7 +192,7 @@ class SensorStateEstimator:
         new.q_last = obs.q_last.copy()
         if self.localiser is not None:
             ratio = robot.l / self.robot.l
-            self.localiser.drift = (1.0 + self.localiser.drift) / ratio - 1.0
+            self.localiser.rescale(ratio)
         self.observer = new
         self.robot = robot
         self.P = robot.vector()

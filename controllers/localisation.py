@@ -5,15 +5,23 @@ At every touchdown the estimator dead-reckons the new stance foot from the model
 position drift by a few millimetres per footstep. The scanner's heights (relative to the stance
 foot, at known offsets ahead of it) are a height profile that can be slid along the map: at the
 true position the profile, shifted by the stance foot's height, matches the map; block edges
-make the match sharp. :class:`ScanLocaliser` keeps a Gaussian belief (a two-state Kalman
-filter) about the error of the estimated foot position and the odometry's drift rate (metres
-of error per metre walked; a model error makes it systematic): at each touchdown the drift
-predicts the new error and the odometry adds its variance (a fraction of the step length); the
-scan's likelihood over a grid of horizontal shifts (the vertical offset fitted per shift)
-multiplies the predicted error's distribution, and the posterior's mean and variance are
-taken in as a measurement of the error; its mean corrects the foot. Where the map is flat
-around the robot every shift matches equally well: the posterior is the prediction, and only
-the learnt drift (zero on a nominal robot) corrects the foot while the variance grows.
+make the match sharp.
+
+:class:`ScanLocaliser` is a point-mass (grid) Bayes filter over two quantities: the error of
+the estimated foot position and the odometry's drift rate (metres of error per metre walked; a
+model error makes it systematic). A priori the model is right, its drift within its
+calibration, or wrong by a few per cent, with even odds. At each touchdown every drift on the
+grid moves the error by its share of the step and the odometry blurs it (a fraction of the
+step length); the scan's likelihood over the grid of errors (the vertical offset fitted per
+shift) multiplies the belief, and the belief's mean error corrects the foot.
+
+A scan point between two heights of the map only says on which side of an edge the foot is:
+its likelihood is a step, not a bump. A Gaussian belief turned such a bound into a measurement
+of the error and learnt a drift from it (a nominal robot walking up stairs learnt -2 % and
+mislocated its feet by 25 mm); the grid keeps the bound as it is, and the prior's odds keep a
+robot whose model is right from taking it for a drift until the scans rule that out. Where the
+map is flat around the robot every shift matches equally well and the belief only moves with
+the learnt drift while it widens.
 """
 
 from __future__ import annotations
@@ -23,11 +31,17 @@ from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
+from scipy.ndimage import gaussian_filter1d
 
-__all__ = ["LocalisationResult", "ScanLocaliser"]
+__all__ = ["NOMINAL_DRIFT", "LocalisationResult", "ScanLocaliser"]
 
-_MAX_SHIFT = 0.1  # largest correction searched [m]
-_GRID_POINTS = 401  # shifts on the search grid
+_MAX_SHIFT = 0.1  # largest error represented [m]
+_GRID_POINTS = 401  # errors on the grid (0.5 mm apart)
+_DRIFT_POINTS = 61  # drift rates on the grid, over +-3 drift_sigma ...
+_NOMINAL_POINTS = 21  # ... and more over +-3 NOMINAL_DRIFT
+#: standard deviation of the drift rate of a model that is right (its calibration)
+NOMINAL_DRIFT = 0.005
+_SUPPORT = 1e-12  # belief below this fraction of its peak counts as zero
 
 
 @dataclass(frozen=True)
@@ -50,7 +64,8 @@ class LocalisationResult:
 
 
 class ScanLocaliser:
-    """Gaussian belief about the stance foot's horizontal error, corrected by scan matching.
+    """Grid belief about the stance foot's horizontal error and the drift rate, corrected by
+    scan matching.
 
     Args:
         offsets: x offsets of the scan points from the stance foot [m].
@@ -59,8 +74,11 @@ class ScanLocaliser:
         scan_range: readings at ``+-scan_range`` [m] are clipped and not used, > 0.
         odometry_error: standard deviation of the dead-reckoned step length's random error,
             relative to the step length (0.02: 2 %), >= 0.
-        drift_sigma: prior standard deviation of the drift rate (a systematic relative error of
-            the step length; 0.05 covers a leg 5 % off), >= 0.
+        drift_sigma: prior standard deviation of the drift rate of a wrong model (a systematic
+            relative error of the step length; 0.05 covers a leg 5 % off), in [0, 0.2].
+        nominal_weight: prior probability that the model is right, its drift rate then within
+            the calibration's ``NOMINAL_DRIFT`` (0.5 %), in [0, 1]. A scan that bounds the
+            error on one side only then moves a nominal robot's estimate less.
         initial_sigma: standard deviation of the foot-x error at the start [m], >= 0.
         outlier: a point's residual counts at most ``outlier`` standard deviations (a truncated
             quadratic: one bad reading cannot veto a shift), > 0.
@@ -73,6 +91,7 @@ class ScanLocaliser:
         scan_range: float,
         odometry_error: float = 0.02,
         drift_sigma: float = 0.05,
+        nominal_weight: float = 0.5,
         initial_sigma: float = 0.002,
         outlier: float = 3.0,
     ) -> None:
@@ -80,8 +99,9 @@ class ScanLocaliser:
             "scan_sigma": (scan_sigma, scan_sigma > 0),
             "scan_range": (scan_range, scan_range > 0),
             "odometry_error": (odometry_error, odometry_error >= 0),
-            "drift_sigma": (drift_sigma, drift_sigma >= 0),
-            "initial_sigma": (initial_sigma, initial_sigma >= 0),
+            "drift_sigma": (drift_sigma, 0 <= drift_sigma <= 0.2),
+            "nominal_weight": (nominal_weight, 0 <= nominal_weight <= 1),
+            "initial_sigma": (initial_sigma, 0 <= initial_sigma <= _MAX_SHIFT / 4),
             "outlier": (outlier, outlier > 0),
         }
         for name, (v, ok) in checks.items():
@@ -92,33 +112,85 @@ class ScanLocaliser:
         self.scan_range = float(scan_range)
         self.odometry_error = float(odometry_error)
         self.drift_sigma = float(drift_sigma)
+        self.nominal_weight = float(nominal_weight)
         self.initial_sigma = float(initial_sigma)
         self.outlier = float(outlier)
+        self.errors = np.linspace(-_MAX_SHIFT, _MAX_SHIFT, _GRID_POINTS)
+        self._du = float(self.errors[1] - self.errors[0])
+        rmax = 3.0 * self.drift_sigma
+        if rmax > 0:
+            rates = np.r_[
+                np.linspace(-rmax, rmax, _DRIFT_POINTS),
+                np.linspace(-3 * NOMINAL_DRIFT, 3 * NOMINAL_DRIFT, _NOMINAL_POINTS),
+            ]
+            self.rates = np.unique(rates.round(12))
+        else:
+            self.rates = np.zeros(1)
         self.reset()
 
     def reset(self) -> None:
-        """Forget the episode: the error's variance back to ``initial_sigma ** 2``, the drift
-        rate to zero with variance ``drift_sigma ** 2``."""
-        self.drift = 0.0
-        self.cov = np.diag([self.initial_sigma**2, self.drift_sigma**2])
+        """Forget the episode: the error ~ N(0, ``initial_sigma``^2) and, independent of it,
+        the drift rate ~ N(0, ``NOMINAL_DRIFT``^2) with probability ``nominal_weight``, else
+        N(0, ``drift_sigma``^2)."""
+        r = self.rates
+        if r.size > 1:  # densities times the cells' widths
+            width = np.gradient(r)
+            wide = np.exp(-0.5 * (r / self.drift_sigma) ** 2) / self.drift_sigma
+            spike = np.exp(-0.5 * (r / NOMINAL_DRIFT) ** 2) / NOMINAL_DRIFT
+            prior = ((1 - self.nominal_weight) * wide + self.nominal_weight * spike) * width
+        else:
+            prior = np.ones(1)
+        self.belief = np.outer(prior, _gaussian(self.errors, self.initial_sigma))
+        self.belief /= self.belief.sum()
+
+    @property
+    def drift(self) -> float:
+        """Mean of the drift rate (relative error of the dead-reckoned step length)."""
+        return float(self.belief.sum(axis=1) @ self.rates)
+
+    @property
+    def drift_sd(self) -> float:
+        """Standard deviation of the drift rate."""
+        w = self.belief.sum(axis=1)
+        return math.sqrt(max(float(w @ (self.rates - self.drift) ** 2), 0.0))
 
     @property
     def sigma(self) -> float:
-        """Current standard deviation of the foot-x error [m]."""
-        return math.sqrt(self.cov[0, 0])
+        """Standard deviation of the foot-x error [m] (at least the grid's resolution)."""
+        w = self.belief.sum(axis=0)
+        m = float(w @ self.errors)
+        return math.sqrt(max(float(w @ (self.errors - m) ** 2), self._du**2 / 12))
 
     def predict(self, step: float) -> float:
-        """A new footstep of dead-reckoned horizontal length ``step`` [m]: the learnt drift
-        predicts the error it adds, the odometry its variance. Returns the predicted mean
+        """A new footstep of dead-reckoned horizontal length ``step`` [m]: every drift rate
+        moves the error by its share of the step and the odometry blurs it. Returns the mean
         error [m], to be added to the dead-reckoned foot (the belief is then centred on it)."""
         L = abs(float(step))
         if not math.isfinite(L):
             raise ValueError(f"step must be finite, got {step!r}")
-        F = np.array([[1.0, L], [0.0, 1.0]])
-        cov = F @ self.cov @ F.T
-        cov[0, 0] = min(cov[0, 0] + (self.odometry_error * L) ** 2, (_MAX_SHIFT / 4) ** 2)
-        self.cov = cov
-        return self.drift * L
+        b = _shift_rows(self.belief, self.rates * L / self._du)
+        blur = self.odometry_error * L / self._du
+        if blur > 0.05 and self.sigma < _MAX_SHIFT / 4:  # beyond that the scans cannot tell
+            b = gaussian_filter1d(b, blur, axis=1, mode="constant", truncate=5.0)
+        self.belief = b / b.sum()
+        return self._recentre()
+
+    def rescale(self, ratio: float) -> None:
+        """The dead reckoning's leg length was multiplied by ``ratio`` (> 0): the drift rates
+        are re-referred to it (a drift ``r`` becomes ``(1 + r) / ratio - 1``)."""
+        if not (math.isfinite(ratio) and ratio > 0):
+            raise ValueError(f"ratio = {ratio!r}; allowed: > 0")
+        if self.rates.size == 1:
+            return
+        old = ratio * (1.0 + self.rates) - 1.0  # the old rate each new grid rate came from
+        pos = np.interp(old, self.rates, np.arange(self.rates.size), left=-1.0, right=-1.0)
+        b = np.zeros_like(self.belief)
+        ok = pos >= 0
+        i0 = np.minimum(np.floor(pos[ok]).astype(int), self.rates.size - 2)
+        f = (pos[ok] - i0)[:, None]
+        b[ok] = (1.0 - f) * self.belief[i0] + f * self.belief[i0 + 1]
+        if b.sum() > 0:  # else the re-referred drift is off the grid: keep the belief
+            self.belief = b / b.sum()
 
     def update(
         self,
@@ -147,59 +219,79 @@ class ScanLocaliser:
             raise ValueError(f"scan must have {self.offsets.size} heights, got {s.size}")
         if int(readings) != readings or readings < 1:
             raise ValueError(f"readings = {readings!r}; allowed: integer >= 1")
-        cov = self.cov
-        v0 = cov[0, 0]
-        sig0 = math.sqrt(v0)
+        sig0 = self.sigma
         sigma = math.hypot(self.scan_sigma / math.sqrt(readings), map_sigma)
-        m, var, b, n = self._match(x, sig0, s, sigma, height, known)
-        shift = 0.0
-        if var is not None and var < 0.99 * v0:  # below 1 %: the grid, not the scan
-            # the scan's information as a measurement z +- sqrt(r) of the error
-            r = 1.0 / (1.0 / var - 1.0 / v0)
-            z = m + r * m / v0
-            k = cov[:, 0] / (v0 + r)
-            self.cov = cov - np.outer(k, cov[0, :])
-            shift = float(k[0] * z)
-            self.drift += float(k[1] * z)
-        return LocalisationResult(shift, b, sig0, self.sigma, n)
+        marginal = self.belief.sum(axis=0)
+        support = np.flatnonzero(marginal > _SUPPORT * marginal.max())
+        cols = slice(support[0], support[-1] + 1)
+        cost, b, n = self._match(x, self.errors[cols], s, sigma, height, known)
+        if cost is None:
+            return LocalisationResult(0.0, math.nan, sig0, sig0, n)
+        post = self.belief[:, cols] * np.exp(-(cost - cost.min()))[None, :]
+        self.belief[:, cols] = post
+        self.belief /= self.belief.sum()
+        shift = self._recentre()
+        k = int(np.argmin(np.abs(self.errors[cols] - shift)))
+        return LocalisationResult(shift, float(b[k]), sig0, self.sigma, n)
+
+    def _recentre(self) -> float:
+        """Move the belief so that its mean error is zero; returns the mean it had [m]."""
+        m = float(self.belief.sum(axis=0) @ self.errors)
+        if abs(m) > 1e-3 * self._du:
+            b = _shift_rows(self.belief, np.full(self.rates.size, -m / self._du))
+            self.belief = b / b.sum()
+        return m
 
     def _match(
         self,
         x: float,
-        sig0: float,
+        d: np.ndarray,
         s: np.ndarray,
         sigma: float,
         height: Callable[[np.ndarray], np.ndarray],
         known: Callable[[np.ndarray], np.ndarray] | None,
-    ) -> tuple[float, float | None, float, int]:
-        """Posterior mean and variance of the shift [m, m^2] of the foot from ``x`` [m] under a
-        prior ``N(0, sig0^2)``, the foot's height there [m] and the points used (variance None
-        when fewer than two points fall on the known map)."""
-        if sig0 <= 0.0:
-            return 0.0, None, math.nan, 0
+    ) -> tuple[np.ndarray | None, np.ndarray, int]:
+        """Negative log-likelihood of the scan ``s`` for the foot at ``x + d`` [m] (None when
+        fewer than two points fall on the known map), the foot's height at each shift [m] and
+        the points used."""
         # the contact: the ground under the foot is at the foot's height
         off = np.r_[0.0, self.offsets]
         s = np.r_[0.0, s]
         use = np.isfinite(s) & (np.abs(s) < self.scan_range)
-        half = min(4.0 * sig0, _MAX_SHIFT)
-        d = np.linspace(-half, half, _GRID_POINTS)
         X = x + d[:, None] + off[None, use]
         ok = np.asarray(known(X), dtype=bool) if known is not None else np.ones(X.shape, bool)
         # points unknown at some shift are dropped at every shift (equal footing for all)
         cols = ok.all(axis=0)
         n = int(cols.sum())
         if n < 2:
-            return 0.0, None, math.nan, n
+            return None, np.full(d.size, math.nan), n
         H = np.asarray(height(X[:, cols]), dtype=np.float64)
         R = H - s[use][cols][None, :]
         b = np.median(R, axis=1)  # the stance foot's height at each shift
         z = (R - b[:, None]) / sigma
-        cost = 0.5 * np.minimum(z * z, self.outlier**2).sum(axis=1)
-        logp = -0.5 * (d / sig0) ** 2 - cost
-        w = np.exp(logp - logp.max())
-        w /= w.sum()
-        mean = float(w @ d)
-        # the grid's spacing bounds the resolution
-        var = max(float(w @ (d - mean) ** 2), (d[1] - d[0]) ** 2)
-        k = int(np.argmin(np.abs(d - mean)))
-        return mean, var, float(b[k]), n
+        return 0.5 * np.minimum(z * z, self.outlier**2).sum(axis=1), b, n
+
+
+def _gaussian(x: np.ndarray, sigma: float) -> np.ndarray:
+    """Unnormalised N(0, sigma^2) on the grid ``x`` (all mass on the point nearest 0 when sigma
+    is below the grid's spacing)."""
+    if x.size > 1 and sigma >= x[1] - x[0]:
+        return np.exp(-0.5 * (x / sigma) ** 2)
+    out = np.zeros_like(x)
+    out[np.argmin(np.abs(x))] = 1.0
+    return out
+
+
+def _shift_rows(p: np.ndarray, a: np.ndarray) -> np.ndarray:
+    """Each row ``j`` of ``p`` moved by ``a[j]`` grid points (linear interpolation; mass moved
+    off the grid is lost)."""
+    n = p.shape[1]
+    k = np.floor(-a).astype(int)  # new[j, i] = old[j, i - a[j]]
+    f = (-a - k)[:, None]
+    idx = np.arange(n)[None, :] + k[:, None]
+    out = np.zeros_like(p)
+    for shift, w in ((0, 1.0 - f), (1, f)):
+        j = idx + shift
+        ok = (j >= 0) & (j < n)
+        out += np.where(ok, np.take_along_axis(p, np.clip(j, 0, n - 1), axis=1), 0.0) * w
+    return out

@@ -268,7 +268,7 @@ class ReferencePolicy:
         t0 = time.perf_counter()
         est, l = self.estimator, self.robot.l  # noqa: E741
         loc = est.localiser
-        if loc is not None and abs(loc.drift) > DRIFT_Z * math.sqrt(loc.cov[1, 1]):
+        if loc is not None and abs(loc.drift) > DRIFT_Z * loc.drift_sd:
             l = self.robot.l * (1.0 + loc.drift)  # noqa: E741  (a drift the scans are sure of)
         ident = self.identifier
         ident.leg_length = l
@@ -276,12 +276,13 @@ class ReferencePolicy:
         fit = ident.fit()
         if fit is None:
             return
-        robot, note = self.robot, None
-        if fit.significant or l != self.robot.l:
+        # data that do not reject the nominal model (with its leg) bring it back
+        robot, note = self.nominal_robot, None
+        if fit.significant or l != self.nominal_robot.l:
             try:
                 robot = robot_from_coefficients(self.nominal_robot, fit.theta, l)
             except ValueError as exc:
-                note = str(exc)
+                robot, note = self.robot, str(exc)
         old, new = self.robot.coefficients(), robot.coefficients()
         change = max(abs(new[k] / old[k] - 1.0) for k in ("p1", "p2", "p3", "p4", "p5"))
         # below MODEL_CHANGE the model in use already explains the data: no new planner

@@ -91,6 +91,11 @@ def cell_summary(cell: Cell, records: Sequence[dict[str, Any]], seed: int = 0) -
         )
     else:
         out["cost_of_transport"] = out["cost_of_transport_ci"] = None
+    errors = [r["foot_error_max"] for r in records if r.get("foot_error_max") is not None]
+    # the policy's stance-foot estimate: each episode's worst touchdown [m]
+    out["foot_error_median"], out["foot_error_p95"] = (
+        (float(np.median(errors)), float(np.percentile(errors, 95))) if errors else (None, None)
+    )
     out["failure_reasons"] = dict(
         sorted(Counter(r["failure"] for r in records if not r["success"]).items())
     )
@@ -181,6 +186,8 @@ CSV_COLUMNS = (
     "mean_distance",
     "mean_speed",
     "cost_of_transport",
+    "foot_error_median",
+    "foot_error_p95",
 )
 
 
@@ -199,7 +206,7 @@ def summary_csv(summary: dict[str, Any]) -> str:
     for c in summary["cells"]:
         row: list[Any] = []
         for col in CSV_COLUMNS:
-            value = c[col]
+            value = c.get(col)
             row.append(json.dumps(value, sort_keys=True) if isinstance(value, dict) else value)
             if f"{col}_ci" in c:
                 row += list(c[f"{col}_ci"] or ("", ""))

@@ -7,7 +7,7 @@ import pytest
 import envs  # noqa: F401  (registers the ids)
 from controllers import make_reference_policy
 from controllers.estimator import SensorStateEstimator
-from controllers.localisation import ScanLocaliser
+from controllers.localisation import NOMINAL_DRIFT, ScanLocaliser
 from controllers.mapping import ScanMap
 from envs.physics.terrain import Terrain
 from envs.sensors import SensorConfig
@@ -62,9 +62,9 @@ def test_flat_ground_gives_no_correction():
     flat = Terrain.flat()
     rng = np.random.default_rng(1)
     for k in range(10):
-        assert loc.predict(0.14) == 0.0
+        assert abs(loc.predict(0.14)) < 1e-12
         res = loc.update(0.14 * (k + 1), scan(flat, 0.0, rng, 1), flat.height)
-        assert abs(res.shift) < 1e-12 and res.sigma == res.sigma_prior
+        assert abs(res.shift) < 1e-12 and res.sigma == pytest.approx(res.sigma_prior, rel=1e-9)
     assert loc.sigma > 0.002  # the uncertainty grows, the estimate stays
 
 
@@ -175,3 +175,53 @@ def test_localisation_keeps_the_nominal_estimate():
     # m: dead reckoning alone stays within 5 mm here; a scan that fits over an interval of
     # shifts may move the foot by a few millimetres within it
     assert max(feet) < 8e-3
+
+
+def test_localiser_belief_is_the_exact_posterior_on_a_staircase():
+    """Without odometry noise the true foot error is ``e0 + r * walked`` for an initial error
+    ``e0`` and a drift ``r``: the posterior over that plane, by brute force on a fine grid,
+    is what the filter's corrections and drift must equal. The stair risers, scanned 5 cm
+    apart, bound the error on one side only, which a Gaussian belief gets wrong."""
+    stairs = Terrain.stairs(edges=[0.40, 0.62], rises=[0.0125, 0.0125])
+    sigma = np.hypot(NOISE, 1e-3 / 12**0.5)
+    loc = ScanLocaliser(OFFSETS, sigma, 0.3, odometry_error=0.0, initial_sigma=0.004)
+    rng = np.random.default_rng(3)
+    e0 = np.linspace(-0.02, 0.02, 801)[None, :]
+    r = np.linspace(-0.15, 0.15, 601)[:, None]
+    wide, nominal = (
+        np.exp(-0.5 * (r / 0.05) ** 2) / 0.05,
+        np.exp(-0.5 * (r / NOMINAL_DRIFT) ** 2) / NOMINAL_DRIFT,
+    )
+    logp = -0.5 * (e0 / 0.004) ** 2 + np.log(0.5 * wide + 0.5 * nominal)
+    true = est = walked = 0.0
+    for _ in range(5):
+        length = rng.uniform(0.13, 0.17)
+        true += 1.03 * length  # the drift: 3 %
+        est += length
+        walked += length
+        est += loc.predict(length)
+        s = scan(stairs, true, rng, 1)
+        est += loc.update(est, s, stairs.height).shift
+        cost, _, _ = loc._match(walked, (e0 + r * walked).ravel(), s, sigma, stairs.height, None)
+        logp = logp - cost.reshape(logp.shape)
+        w = np.exp(logp - logp.max())
+        w /= w.sum()
+        assert est - walked == pytest.approx(float((w * (e0 + r * walked)).sum()), abs=5e-4)
+        assert loc.drift == pytest.approx(float((w * r).sum()), abs=3e-3)
+
+
+def test_localiser_drift_is_re_referred_to_a_new_leg_length():
+    loc = ScanLocaliser(OFFSETS, 0.002, 0.3)
+    rng = np.random.default_rng(4)
+    true = est = 0.0
+    for _ in range(10):  # on the blocks with steps 4 % longer than dead-reckoned
+        true += 0.15 * 1.04
+        est += 0.15
+        est += loc.predict(0.15)
+        est += loc.update(est, scan(BLOCKS, true, rng, 1), BLOCKS.height).shift
+    drift = loc.drift
+    assert drift == pytest.approx(0.04, abs=0.01)
+    loc.rescale(1.04)  # the dead reckoning's legs now 4 % longer: no drift left
+    assert loc.drift == pytest.approx((1 + drift) / 1.04 - 1, abs=1e-3)
+    with pytest.raises(ValueError, match="ratio"):
+        loc.rescale(0.0)
