@@ -42,6 +42,7 @@ _NOMINAL_POINTS = 21  # ... and more over +-3 NOMINAL_DRIFT
 #: standard deviation of the drift rate of a model that is right (its calibration)
 NOMINAL_DRIFT = 0.005
 _SUPPORT = 1e-12  # belief below this fraction of its peak counts as zero
+_RECENTRE = 0.01  # the grid follows the estimate once it is this far off [m]
 
 
 @dataclass(frozen=True)
@@ -141,6 +142,7 @@ class ScanLocaliser:
         else:
             prior = np.ones(1)
         self.belief = np.outer(prior, _gaussian(self.errors, self.initial_sigma))
+        self._origin = 0.0  # the grid's zero error relative to the estimate [m]
         self.belief /= self.belief.sum()
 
     @property
@@ -224,22 +226,31 @@ class ScanLocaliser:
         marginal = self.belief.sum(axis=0)
         support = np.flatnonzero(marginal > _SUPPORT * marginal.max())
         cols = slice(support[0], support[-1] + 1)
-        cost, b, n = self._match(x, self.errors[cols], s, sigma, height, known)
+        d = self.errors[cols] + self._origin  # the shifts from x
+        cost, b, n = self._match(x, d, s, sigma, height, known)
         if cost is None:
             return LocalisationResult(0.0, math.nan, sig0, sig0, n)
         post = self.belief[:, cols] * np.exp(-(cost - cost.min()))[None, :]
         self.belief[:, cols] = post
         self.belief /= self.belief.sum()
         shift = self._recentre()
-        k = int(np.argmin(np.abs(self.errors[cols] - shift)))
+        k = int(np.argmin(np.abs(d - shift)))
         return LocalisationResult(shift, float(b[k]), sig0, self.sigma, n)
 
     def _recentre(self) -> float:
-        """Move the belief so that its mean error is zero; returns the mean it had [m]."""
-        m = float(self.belief.sum(axis=0) @ self.errors)
-        if abs(m) > 1e-3 * self._du:
-            b = _shift_rows(self.belief, np.full(self.rates.size, -m / self._du))
+        """The estimate moves by the belief's mean error, which becomes zero; returns that mean
+        [m]. The grid moves with it by whole cells once it is off by more than ``_RECENTRE``."""
+        m = float(self.belief.sum(axis=0) @ self.errors) + self._origin
+        self._origin -= m
+        k = int(round(self._origin / self._du))
+        if abs(self._origin) > _RECENTRE:
+            b = np.zeros_like(self.belief)
+            if k > 0:
+                b[:, k:] = self.belief[:, :-k]
+            else:
+                b[:, :k] = self.belief[:, -k:]
             self.belief = b / b.sum()
+            self._origin -= k * self._du
         return m
 
     def _match(
