@@ -142,8 +142,8 @@ class ScanLocaliser:
         else:
             prior = np.ones(1)
         self.belief = np.outer(prior, _gaussian(self.errors, self.initial_sigma))
-        self._origin = 0.0  # the grid's zero error relative to the estimate [m]
         self.belief /= self.belief.sum()
+        self._origin = 0.0  # the grid's zero error relative to the estimate [m]
 
     @property
     def drift(self) -> float:
