@@ -107,7 +107,8 @@ class IdentifiedModel:
     Attributes:
         theta: ``(p1, p2, p3, p4, p5, Fc, Fv)`` in the nominal input's scale (SI units).
         relative: ``theta / nominal - 1`` per coefficient.
-        sigma: posterior standard deviation of ``relative`` per coefficient.
+        sigma: posterior standard deviation of ``relative`` per coefficient (with
+            :data:`SD_FLOOR` added in quadrature).
         segments: segments fitted.
         rms: root-mean-square angle residual [rad].
         distance2: squared Mahalanobis distance of the fitted coefficients (all but ``p2``)

@@ -2,9 +2,10 @@
 
 Per cell: the success rate with its Wilson interval, the means of footsteps, distance [m] and
 speed [m/s] with bootstrap intervals, the cost of transport (total motor work over total
-``m g distance``, as ``roughwalk evaluate`` reports it) with a paired bootstrap interval, and
-the failure reasons counted. Intervals are at 95 %, seeded: the same records give the same
-summary.
+``m g distance``, as ``roughwalk evaluate`` reports it) with a paired bootstrap interval, the
+median and 95th percentile of the episodes' ``foot_error_max`` [m] (None for a policy that
+does not estimate the stance foot), and the failure reasons counted. Intervals are at 95 %,
+seeded: the same records give the same summary.
 
 Across training seeds (when the spec names groups): each group is an agent, each of its
 policies one training seed, each env setting a task, the score of a run on a task its success
