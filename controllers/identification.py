@@ -19,7 +19,12 @@ better than the dynamics (a free ``p2`` absorbs a push instead).
 is cut into segments of about 0.15 s; each segment is simulated from its own initial state
 (fitted too) under the inputs that were applied, and the simulated angles are compared with the
 measured ones (a Huber loss; a segment that the fitted model still cannot explain, a push say,
-is then left out and the fit repeated). Equation-error fits (regressing on differentiated
+is then left out and the fit repeated). The solver is an iteratively reweighted
+Levenberg-Marquardt on the Huber cost: a segment's residuals depend on the coefficients and its
+own initial state only, so each iteration eliminates the segments' 4 x 4 blocks (a Schur
+complement) and costs in proportion to the number of segments, where a dense solver's cost grows
+with its cube; the coefficients' covariance is the inverse of the same Schur complement at the
+solution. Equation-error fits (regressing on differentiated
 encoder readings) are biased here: the unactuated row of the dynamics is homogeneous in
 ``theta``, and noise in the differentiated angles pulls ``p3`` and ``p4 + p5`` to zero
 together. Output error puts the noise where it is, on the measured angles. A Gaussian prior
@@ -41,7 +46,7 @@ from dataclasses import dataclass
 
 import numpy as np
 from numba import njit
-from scipy.optimize import least_squares
+from scipy.optimize import least_squares  # robot_from_coefficients
 
 from envs.physics import model
 from envs.physics.params import P1, P2, P3, P4, P5, PFC, PFV, RobotParams
@@ -78,6 +83,7 @@ SD_FLOOR = 0.01
 #: 99th percentile of chi-square with 6 degrees of freedom (scipy.stats.chi2.ppf(0.99, 6))
 CHI2_99 = 16.812
 _INIT_SCALE = (1e-3, 1e-3, 0.1, 0.1)  # typical size of the initial-state corrections
+_EPS = float(np.finfo(np.float64).eps)
 
 
 @njit(cache=True)
@@ -98,6 +104,211 @@ def simulate_swing(P, x0, u, dt, nsub):  # pragma: no cover - compiled
             a1, a2 = model.accelerations(P, q1, q2, w1, w2, u[k])
             q1, q2, w1, w2, _w, _p, _a = model.swing_rk4(P, q1, q2, w1, w2, u[k], h, a1, a2)
     return out
+
+
+@njit(cache=True)
+def _coefficients(free, free_index, ratio):  # pragma: no cover - compiled
+    """All seven relative coefficients from the fitted ones: ``p2`` follows ``p4`` and the leg
+    length ratio ``ratio`` (``p2 / p4 = l / g`` for every robot)."""
+    z = np.empty(len(COEFFICIENTS))
+    z[free_index] = free
+    z[1] = (1.0 + z[3]) * ratio - 1.0
+    return z
+
+
+@njit(cache=True)
+def _residuals(
+    p, P, index, nominal, free_index, ratio, prior, Q, U, bounds, dt, nsub, sig
+):  # pragma: no cover - compiled
+    """The fit's residuals at ``p`` (fitted coefficients, then each segment's initial-state
+    correction): the prior's, then each segment's simulated minus measured angles [standard
+    deviations]; the segments are the rows ``bounds[s]:bounds[s + 1]`` of ``Q`` and ``U``."""
+    nf = free_index.size
+    P = P.copy()
+    P[index] = nominal * (1.0 + _coefficients(p[:nf], free_index, ratio))
+    out = np.empty(nf + 2 * Q.shape[0])
+    out[:nf] = p[:nf] / prior
+    x0 = np.empty(4)
+    for s in range(bounds.size - 1):
+        a, b = bounds[s], bounds[s + 1]
+        d = p[nf + 4 * s : nf + 4 * s + 4]
+        x0[0] = Q[a, 0] + d[0]
+        x0[1] = Q[a, 1] + d[1]
+        x0[2] = d[2]
+        x0[3] = d[3]
+        sim = simulate_swing(P, x0, U[a:b], dt, nsub)
+        for k in range(b - a):
+            out[nf + 2 * (a + k)] = (sim[k, 0] - Q[a + k, 0]) / sig
+            out[nf + 2 * (a + k) + 1] = (sim[k, 1] - Q[a + k, 1]) / sig
+    return out
+
+
+@njit(cache=True)
+def _jacobian(
+    p, coefficients_too, P, index, nominal, free_index, ratio, prior, Q, U, bounds, dt, nsub, sig
+):  # pragma: no cover - compiled
+    """The residuals ``r`` at ``p`` and their forward-difference Jacobian in two blocks: ``Jt``
+    by the fitted coefficients ``(m, nf)`` and ``Jd`` by the initial-state corrections ``(m,
+    4)``, row ``i`` of ``Jd`` by those of the segment row ``i`` belongs to (zero on the
+    prior's rows). A segment's residuals depend on the coefficients and its own initial state
+    only, so the k-th initial component of every segment moves at once. Without
+    ``coefficients_too`` ``Jt`` is left zero."""
+    args = (P, index, nominal, free_index, ratio, prior, Q, U, bounds, dt, nsub, sig)
+    nf = free_index.size
+    r0 = _residuals(p, *args)
+    Jt = np.zeros((r0.size, nf))
+    Jd = np.zeros((r0.size, 4))
+    for j in range(nf if coefficients_too else 0):
+        h = 1e-7 * max(1.0, abs(p[j]))
+        e = p.copy()
+        e[j] += h
+        Jt[:, j] = (_residuals(e, *args) - r0) / h
+    for k in range(4):
+        h = 1e-7 * max(1.0, np.max(np.abs(p[nf + k :: 4])))
+        e = p.copy()
+        e[nf + k :: 4] += h
+        Jd[nf:, k] = (_residuals(e, *args)[nf:] - r0[nf:]) / h
+    return r0, Jt, Jd
+
+
+@njit(cache=True)
+def _huber(r, c):  # pragma: no cover - compiled
+    """The Huber cost ``0.5 sum c^2 rho((r / c)^2)`` (``rho(z) = z`` up to 1, ``2 sqrt(z) - 1``
+    beyond), the weights of the gradient ``rho'`` and of the Gauss-Newton Hessian
+    (``rho' + 2 rho'' z``: 0 beyond the threshold, floored at machine epsilon)."""
+    n = r.size
+    w_grad = np.ones(n)
+    w_hess = np.ones(n)
+    cost = 0.0
+    for i in range(n):
+        z = (r[i] / c) ** 2
+        if z <= 1.0:
+            cost += z
+        else:
+            cost += 2.0 * math.sqrt(z) - 1.0
+            w_grad[i] = 1.0 / math.sqrt(z)
+            w_hess[i] = _EPS
+    return 0.5 * c * c * cost, w_grad, w_hess
+
+
+@njit(cache=True)
+def _normal_equations(r, Jt, Jd, w_grad, w_hess, bounds):  # pragma: no cover - compiled
+    """The weighted Gauss-Newton system in blocks: ``A = Jt' W Jt`` ``(nf, nf)``, per segment
+    ``B_s = Jt_s' W Jd_s`` ``(nf, 4)`` and ``C_s = Jd_s' W Jd_s`` ``(4, 4)``, and the gradient
+    ``gt = Jt' rho' r``, ``gd_s = Jd_s' rho' r_s``."""
+    nf, S = Jt.shape[1], bounds.size - 1
+    WJt = Jt * w_hess[:, None]
+    A = Jt.T @ WJt
+    gt = Jt.T @ (w_grad * r)
+    B = np.empty((S, nf, 4))
+    C = np.empty((S, 4, 4))
+    gd = np.empty((S, 4))
+    for s in range(S):
+        a, b = nf + 2 * bounds[s], nf + 2 * bounds[s + 1]
+        Js = np.ascontiguousarray(Jd[a:b])
+        B[s] = np.ascontiguousarray(WJt[a:b]).T @ Js
+        C[s] = Js.T @ (Js * w_hess[a:b][:, None])
+        gd[s] = Js.T @ (w_grad[a:b] * r[a:b])
+    return A, B, C, gt, gd
+
+
+def _fit_huber(
+    p0: np.ndarray,
+    scale: np.ndarray,
+    args: tuple,
+    coefficients_too: bool = True,
+    max_iter: int = 100,
+    tol: float = 1e-8,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """Levenberg-Marquardt on the Huber cost of :func:`_residuals` (scale ``ROBUST_SCALE``)
+    from ``p0``, damping scaled by ``scale`` (typical sizes of the unknowns); without
+    ``coefficients_too`` only the segments' initial states move. Stops when the cost falls
+    by less than ``tol`` relatively, the step is below ``tol`` relative to the point, or the
+    scaled gradient below ``tol``. Returns the point and the undamped blocks ``A, B, C`` of
+    its Gauss-Newton Hessian (:func:`_normal_equations`)."""
+    nf = args[3].size
+    S = args[8].size - 1
+    bounds = args[8]
+    x = p0.copy()
+    d_t, d_d = scale[:nf] ** -2.0, np.asarray(_INIT_SCALE) ** -2.0
+    d = np.concatenate([d_t, np.tile(d_d, S)])
+    free = np.ones(x.size) if coefficients_too else np.r_[np.zeros(nf), np.ones(4 * S)]
+
+    def linearise(x: np.ndarray) -> tuple:
+        # iteratively reweighted: the Hessian's weights are the gradient's (a residual beyond
+        # the Huber threshold keeps its curvature, scaled down), which keeps the steps sane
+        # where the start explains a segment badly
+        lin = _jacobian(x, coefficients_too, *args)
+        cost, wg, wh = _huber(lin[0], ROBUST_SCALE)
+        return (cost, *_normal_equations(*lin, wg, wg, bounds), lin, wg, wh)
+
+    cost, A, B, C, gt, gd, lin, wg, wh = linearise(x)
+    mu = 1e-3
+    nu = 2.0
+    for _ in range(max_iter):
+        g = np.concatenate([gt, gd.ravel()]) * free
+        if np.max(np.abs(g * scale)) < tol:
+            break
+        # Marquardt's damping: mu times the Hessian's diagonal (floored by the scales')
+        d_t = np.maximum(np.diag(A), 1e-6 * scale[:nf] ** -2.0)
+        d_d = np.maximum(np.einsum("sii->si", C), 1e-6 * np.asarray(_INIT_SCALE) ** -2.0)
+        d = np.concatenate([d_t, d_d.ravel()])
+        if coefficients_too:
+            step_t, step_d = _schur_step(A, B, C, gt, gd, mu, d_t, d_d)
+        else:
+            step_t, step_d = np.zeros(nf), _segment_steps(C, gd, mu, d_d)
+        step = np.concatenate([step_t, step_d.ravel()])
+        if np.linalg.norm(step / scale) <= tol * (tol + np.linalg.norm(x / scale)):
+            break
+        trial = x + step
+        cost_new = _huber(_residuals(trial, *args), ROBUST_SCALE)[0]
+        predicted = 0.5 * float(step @ (mu * d * step - g))
+        gain = (cost - cost_new) / predicted if predicted > 0 else -1.0
+        if math.isfinite(cost_new) and gain > 0:
+            x, fell = trial, cost - cost_new
+            cost, A, B, C, gt, gd, lin, wg, wh = linearise(x)
+            mu *= 0.1 if gain > 0.75 else (1.0 if gain > 0.25 else 2.0)
+            nu = 2.0
+            if fell < tol * cost:
+                break
+        else:
+            mu *= nu
+            nu *= 2.0
+    # the covariance's blocks: the Gauss-Newton Hessian of the Huber cost (no curvature beyond
+    # the threshold)
+    A, B, C = _normal_equations(*lin, wg, wh, bounds)[:3]
+    return x, A, B, C
+
+
+@njit(cache=True)
+def _segment_steps(C, gd, mu, dd_):  # pragma: no cover - compiled
+    """The Levenberg-Marquardt steps of the segments' initial states alone ``(S, 4)``."""
+    out = np.empty(gd.shape)
+    for s in range(gd.shape[0]):
+        out[s] = np.linalg.solve(C[s] + mu * np.diag(dd_[s]), -gd[s])
+    return out
+
+
+@njit(cache=True)
+def _schur_step(A, B, C, gt, gd, mu, dt_, dd_):  # pragma: no cover - compiled
+    """The Levenberg-Marquardt step of the block system (``H + mu diag(D)``, ``D = dt_`` on the
+    coefficients and ``dd_`` on each segment's initial state), the segments eliminated by
+    their Schur complement; returns the steps of the coefficients ``(nf,)`` and of the
+    segments ``(S, 4)``."""
+    S = B.shape[0]
+    M = A + mu * np.diag(dt_)
+    rhs = -gt.copy()
+    Cinv = np.empty((S, 4, 4))
+    for s in range(S):
+        Cinv[s] = np.linalg.inv(C[s] + mu * np.diag(dd_[s]))
+        BC = B[s] @ Cinv[s]
+        M -= BC @ B[s].T
+        rhs += BC @ gd[s]
+    step_t = np.linalg.solve(M, rhs)
+    step_d = np.empty((S, 4))
+    for s in range(S):
+        step_d[s] = Cinv[s] @ (-gd[s] - B[s].T @ step_t)
+    return step_t, step_d
 
 
 @dataclass(frozen=True)
@@ -241,67 +452,35 @@ class SwingIdentifier:
         self._z = fit.relative.copy()
         return fit
 
+    def _problem(self, which: list[int]) -> tuple[np.ndarray, np.ndarray, tuple]:
+        """The fit to the segments ``which`` as ``(p0, scale, args)``: the starting point
+        (coefficients, then each segment's initial-state correction), the unknowns' typical
+        sizes and the arguments of :func:`_residuals` after the point."""
+        segments = [self.segments[i] for i in which]
+        Q = np.ascontiguousarray(np.concatenate([q for q, _ in segments]))
+        U = np.ascontiguousarray(np.concatenate([u for _, u in segments]))
+        bounds = np.cumsum([0] + [q.shape[0] for q, _ in segments])
+        prior = self.prior[_FREE]
+        ratio = self.leg_length / self.robot.l
+        args = (self.P.copy(), _INDEX, self.nominal, _FREE, ratio, prior, Q, U, bounds)
+        args += (self.dt, self.substeps, self.angle_sigma)
+        p0 = np.concatenate([self._z[_FREE], self._initial_states(which).ravel()])
+        scale = np.concatenate([prior, np.tile(_INIT_SCALE, len(segments))])
+        return p0, scale, args
+
     def _fit(self, which: list[int]) -> tuple[IdentifiedModel, np.ndarray] | None:
         """The fit to the segments ``which``, and each one's rms residual [standard
         deviations]."""
-        segments = [self.segments[i] for i in which]
-        nf, S = _FREE.size, len(segments)
-        P = self.P.copy()
-        nominal, prior, sig = self.nominal, self.prior[_FREE], self.angle_sigma
-        ratio = self.leg_length / self.robot.l
-
-        def coefficients(free: np.ndarray) -> np.ndarray:
-            z = np.empty(len(COEFFICIENTS))
-            z[_FREE] = free
-            z[1] = (1.0 + z[3]) * ratio - 1.0  # p2 / p4 = l / g for every robot
-            return z
-
-        def residuals(p: np.ndarray) -> np.ndarray:
-            P[_INDEX] = nominal * (1.0 + coefficients(p[:nf]))
-            out = [p[:nf] / prior]
-            for s, (q, u) in enumerate(segments):
-                d = p[nf + 4 * s : nf + 4 * s + 4]
-                x0 = np.array([q[0, 0] + d[0], q[0, 1] + d[1], d[2], d[3]])
-                sim = simulate_swing(P, x0, u, self.dt, self.substeps)
-                out.append(((sim - q) / sig).ravel())
-            return np.concatenate(out)
-
-        rows = np.cumsum([nf] + [2 * q.shape[0] for q, _ in segments])
-
-        def jacobian(p: np.ndarray) -> np.ndarray:
-            # forward differences; a segment's residuals depend on the coefficients and its own
-            # initial state only, so the k-th initial component of every segment moves at once
-            r0 = residuals(p)
-            J = np.zeros((r0.size, p.size))
-            for j in range(nf):
-                h = 1e-7 * max(1.0, abs(p[j]))
-                e = p.copy()
-                e[j] += h
-                J[:, j] = (residuals(e) - r0) / h
-            for k in range(4):
-                h = 1e-7 * max(1.0, float(np.max(np.abs(p[nf + k :: 4]))))
-                e = p.copy()
-                e[nf + k :: 4] += h
-                d = (residuals(e) - r0) / h
-                for s in range(S):
-                    J[rows[s] : rows[s + 1], nf + 4 * s + k] = d[rows[s] : rows[s + 1]]
-            return J
-
-        p0 = np.concatenate([self._z[_FREE], self._initial_states(which).ravel()])
-        scale = np.concatenate([prior, np.tile(_INIT_SCALE, S)])
-        # a robust loss: samples no model explains weigh less
-        res = least_squares(
-            residuals,
-            p0,
-            jac=jacobian,
-            method="trf",
-            x_scale=scale,
-            loss="huber",
-            f_scale=ROBUST_SCALE,
-        )
-        free = res.x[:nf]
+        p0, scale, args = self._problem(which)
+        nf, S, bounds = _FREE.size, len(which), args[8]
+        nominal, prior, sig, ratio = self.nominal, args[5], self.angle_sigma, args[4]
+        x, A, B, C = _fit_huber(p0, scale, args)
+        free = x[:nf]
         try:
-            cov = np.linalg.inv(res.jac.T @ res.jac)[:nf, :nf] + np.diag(np.full(nf, SD_FLOOR**2))
+            # the coefficients' block of the inverse Gauss-Newton Hessian: the inverse of the
+            # Schur complement of the segments' blocks
+            M = A - sum(Bs @ np.linalg.solve(Cs, Bs.T) for Bs, Cs in zip(B, C))
+            cov = np.linalg.inv(M) + np.diag(np.full(nf, SD_FLOOR**2))
             distance2 = float(free @ np.linalg.solve(cov, free))
             sd = np.sqrt(np.clip(np.diag(cov), 0.0, None))
         except np.linalg.LinAlgError:
@@ -309,13 +488,15 @@ class SwingIdentifier:
         if not (np.all(np.isfinite(free)) and math.isfinite(distance2)):
             return None
         for i, j in enumerate(which):
-            self._x0[j] = res.x[nf + 4 * i : nf + 4 * i + 4].copy()
-        z = coefficients(free)
+            self._x0[j] = x[nf + 4 * i : nf + 4 * i + 4].copy()
+        z = _coefficients(free, _FREE, ratio)
         sigma = np.empty(len(COEFFICIENTS))
         sigma[_FREE] = sd
         sigma[1] = sigma[3] * ratio
-        r = residuals(res.x)[nf:]
-        rms = np.array([np.sqrt(np.mean(r[a - nf : b - nf] ** 2)) for a, b in zip(rows, rows[1:])])
+        r = _residuals(x, *args)[nf:]
+        rms = np.array(
+            [np.sqrt(np.mean(r[2 * a : 2 * b] ** 2)) for a, b in zip(bounds, bounds[1:])]
+        )
         fit = IdentifiedModel(
             theta=nominal * (1.0 + z),
             relative=z,
