@@ -42,6 +42,7 @@ import yaml
 import envs  # noqa: F401  (registers the roughwalk ids)
 from agents.config import EVAL_SEED_OFFSET, MAX_SEED, TEST_SEED, ConfigError
 from agents.policies import BASELINES, Policy, make_baseline_policy
+from agents.pretrained import resolve_model
 from agents.runs import atomic_write_stream, find_vecnormalize, load_vecnormalize
 from agents.trained import TrainedPolicy, load_policy
 from controllers.controller import ControllerConfig, PDController, TransverseController
@@ -336,7 +337,8 @@ def load_trained(
     files you trust. Nothing but these two files (and the run's manifest) is read.
 
     Args:
-        model_path: the model file (``.zip``) saved by stable-baselines3.
+        model_path: the model file (``.zip``) saved by stable-baselines3, or a shipped agent
+            (``pretrained:NAME``, :mod:`agents.pretrained`).
         vecnormalize: its ``VecNormalize`` statistics (default: the file saved beside it).
         algo: its algorithm (``ppo``, ``sac``, ...; default: from its run or the file).
 
@@ -344,7 +346,7 @@ def load_trained(
         FileNotFoundError: a file is missing.
         ValueError: a file is damaged, not what it should be, or the algorithm is unknown.
     """
-    path = Path(model_path)
+    path = Path(resolve_model(str(model_path)))
     if not path.is_file():
         raise FileNotFoundError(f"model file not found: {path}")
     if not zipfile.is_zipfile(path):

@@ -20,6 +20,7 @@ import numpy as np
 
 from agents.config import algorithm_class, config_from_dict
 from agents.policies import BASELINES, Policy, make_baseline_policy
+from agents.pretrained import PREFIX, resolve_model
 from agents.runs import (
     MODEL_INFO,
     find_manifest,
@@ -145,7 +146,8 @@ def load_policy(
     by path (a :class:`TrainedPolicy`; unpickles the model and its statistics).
 
     Args:
-        spec: a baseline's name (``BASELINES``) or the path of a model ``.zip``.
+        spec: a baseline's name (``BASELINES``), the path of a model ``.zip`` or a shipped
+            agent, ``pretrained:NAME`` (:mod:`agents.pretrained`).
         env: the env (baselines only).
         algo: a trained model's algorithm (``ppo``, ``sac``, ``td3``, ``a2c``); by default the
             one recorded in the model, its run or its policy class.
@@ -155,8 +157,10 @@ def load_policy(
         if env is None:
             raise ValueError(f"baseline policy {spec!r} needs the env")
         return make_baseline_policy(spec, env)
+    spec = resolve_model(spec)
     if Path(spec).suffix == ".zip" or Path(spec).is_file():
         return TrainedPolicy(spec, vecnormalize=vecnormalize, algo=algo)
     raise ValueError(
-        f"policy {spec!r} is neither a baseline ({', '.join(BASELINES)}) nor a model file"
+        f"policy {spec!r} is neither a baseline ({', '.join(BASELINES)}), a model file nor "
+        f"{PREFIX}NAME"
     )

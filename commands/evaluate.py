@@ -51,6 +51,7 @@ from agents.evaluate import (
     write_json,
 )
 from agents.policies import BASELINES
+from agents.pretrained import is_pretrained, resolve_model
 from agents.runs import find_manifest
 from agents.train import set_threads
 from commands.cli import (
@@ -79,7 +80,7 @@ def summary_row(ev: Evaluation) -> list[str]:
     failures = ", ".join(f"{k} {v}" for k, v in sorted(s["failure_reasons"].items())) or "-"
     return [
         ev.policy
-        if ev.policy in BASELINES
+        if ev.policy in BASELINES or is_pretrained(ev.policy)
         else f"{Path(ev.policy).parent.name}/{Path(ev.policy).stem}",
         ev.env_id.removeprefix("roughwalk/") + (f" ({kw})" if kw else ""),
         f"{100 * s['success_rate']:.0f}% ({s['episodes']})",
@@ -200,8 +201,9 @@ def configure(parser: argparse.ArgumentParser) -> None:
     parser.add_argument(
         "--policy",
         required=True,
-        help=f"one of {', '.join(BASELINES)}, or the path of a trained model (.zip; a pickle: "
-        "load only files you trust)",
+        help=f"one of {', '.join(BASELINES)}, a shipped agent (pretrained:NAME; "
+        "`roughwalk evaluate --policy pretrained:` lists them) or the path of a trained model "
+        "(.zip; a pickle: load only files you trust)",
     )
     parser.add_argument(
         "--env", type=env_id, help="env id (default for a trained model: its training env)"
@@ -311,8 +313,9 @@ def _learning_curve_path(args: argparse.Namespace) -> tuple[Path, Path] | None:
         return None
     if args.policy in BASELINES:
         raise ValueError("--plot-learning-curve: needs a trained model, not a baseline")
-    manifest = find_manifest(args.policy)
-    run_dir = manifest.parent if manifest else Path(args.policy).parent
+    model = resolve_model(args.policy)
+    manifest = find_manifest(model)
+    run_dir = manifest.parent if manifest else Path(model).parent
     learning_curve_data(run_dir)
     out = Path(args.plot_learning_curve or run_dir / "learning_curve.png")
     try:
@@ -328,7 +331,11 @@ def run(args: argparse.Namespace) -> int:
     trained = args.policy not in BASELINES
     if trained:
         set_threads(1)
-        if not Path(args.policy).is_file():
+        try:
+            model = resolve_model(args.policy)
+        except ValueError as exc:
+            raise ValueError(f"--policy: {exc}") from None
+        if not Path(model).is_file():
             raise FileNotFoundError(f"--policy: model file not found: {args.policy}")
     elif args.algo or args.vecnormalize:
         raise ValueError("--algo and --vecnormalize apply to trained models, not to baselines")

@@ -10,6 +10,7 @@ A spec (``configs/sweeps/*.yaml``)::
     policies:
       - passive                  # a baseline (passive, pd, reference), a model file (.zip)
       - reference                # or a run folder (its best_model.zip, else model.zip)
+      - pretrained:footstep_ppo_rough_hard   # or a shipped agent (agents.pretrained)
       - policy: runs/ppo_rough_s0
         name: PPO s0             # label (default: the baseline's or the run folder's name)
         group: PPO               # training seeds of one agent share a group (IQM across them)
@@ -46,6 +47,7 @@ import yaml
 from agents.config import TEST_SEED, ConfigError
 from agents.evaluate import eval_seeds, make_env, make_eval_env
 from agents.policies import BASELINES
+from agents.pretrained import PREFIX, is_pretrained, resolve_model
 
 SPEC_KEYS = ("name", "description", "episodes", "seed", "policies", "envs")
 POLICY_KEYS = ("policy", "name", "group", "envs", "options")
@@ -231,13 +233,17 @@ def _is_int(value: Any) -> bool:
 
 
 def resolve_policy(text: str) -> str:
-    """What the evaluation loads for the policy ``text``: a baseline's name as it is, a run
-    folder's ``best_model.zip`` (else ``model.zip``), a model file as it is.
+    """What the evaluation loads for the policy ``text``: a baseline's name as it is, a shipped
+    agent's name (``pretrained:NAME``) as it is, a run folder's ``best_model.zip`` (else
+    ``model.zip``), a model file as it is.
 
     Raises:
         ValueError: none of these.
     """
     if text in BASELINES:
+        return text
+    if is_pretrained(text):
+        resolve_model(text)  # a shipped agent's name, checked; loaded by that name
         return text
     path = Path(text)
     if path.is_dir():
@@ -248,8 +254,8 @@ def resolve_policy(text: str) -> str:
     if path.is_file():
         return text
     raise ValueError(
-        f"unknown policy {text!r}; allowed: {', '.join(BASELINES)}, a model file (.zip) or a "
-        "run folder"
+        f"unknown policy {text!r}; allowed: {', '.join(BASELINES)}, a model file (.zip), a "
+        "run folder or pretrained:NAME"
     )
 
 
@@ -271,6 +277,8 @@ def _policy_entry(i: int, item: Any) -> PolicyEntry:
         raise SpecError(f"{where}.policy: {exc}") from None
     if policy in BASELINES:
         default_name = policy
+    elif is_pretrained(policy):
+        default_name = policy[len(PREFIX) :]
     elif Path(source).is_dir():
         default_name = Path(source).resolve().name
     else:
