@@ -357,12 +357,14 @@ def _closed_loop_replanning(episodes: int, difficulty: float) -> list[Row]:
     """Replanning per footstep of the reference policy (sensors, observer, replanning at every
     touchdown) on ``CompassGaitRough-v0`` at ``difficulty``, evaluation seeds 1,001,000 on:
     median, 95th and 99th percentile over the footsteps of ``episodes`` episodes (the planner
-    call, degradations included); and the time of its online identification per fit (median,
-    95th percentile, largest)."""
+    call, degradations included); the env steps per second of the whole loop (policy and env)
+    against the bare env on the same courses under zero input, in the same run; and the time
+    of its online identification per fit (median, 95th percentile, largest)."""
     env = gym.make("roughwalk/CompassGaitRough-v0", difficulty=difficulty)
     policy = ReferencePolicy(env)
     times: list[float] = []
     fits: list[float] = []
+    steps, t0 = 0, time.perf_counter()
     for k in range(episodes):
         obs, _ = env.reset(seed=1_001_000 + k)
         policy.reset()
@@ -370,8 +372,22 @@ def _closed_loop_replanning(episodes: int, difficulty: float) -> list[Row]:
         while not done:
             obs, _, terminated, truncated, _ = env.step(policy(obs))
             done = terminated or truncated
+            steps += 1
         times += [r.plan_time for r in policy.records[1:] if r.plan_time > 0]
         fits += [r.seconds for r in policy.diagnostics["identified"]]
+    loop = steps / (time.perf_counter() - t0)
+    # the bare env in the same run: the same courses under zero input, as many steps
+    zero = np.zeros(1, dtype=np.float32)
+    bare_steps, k, t0 = 0, 0, time.perf_counter()
+    while bare_steps < steps:
+        env.reset(seed=1_001_000 + k % episodes)
+        k += 1
+        done = False
+        while not done and bare_steps < steps:
+            _, _, terminated, truncated, _ = env.step(zero)
+            done = terminated or truncated
+            bare_steps += 1
+    bare = bare_steps / (time.perf_counter() - t0)
     env.close()
     median, p95, p99 = np.percentile(times, [50, 95, 99]) * 1e3 if times else (np.nan,) * 3
     f50, f95, fmax = (*np.percentile(fits, [50, 95]), max(fits)) if fits else (np.nan,) * 3
@@ -381,6 +397,12 @@ def _closed_loop_replanning(episodes: int, difficulty: float) -> list[Row]:
             f"replanning per footstep in closed loop (median / p95 / p99): {where}",
             f"{median:.1f} / {p95:.1f} / {p99:.1f}",
             "ms",
+        ),
+        (
+            f"reference policy in the loop, env steps/s (its own planning, identification and "
+            f"sensors included) / the bare env in the same run: {where}",
+            f"{loop:,.0f} / {bare:,.0f} (x{bare / loop:.0f})",
+            "steps/s",
         ),
         (
             f"online identification per fit, first 6 footsteps (median / p95 / max): {where}",

@@ -59,7 +59,7 @@ class HorizonSolution:
     def lyapunov(self, z: np.ndarray, theta: float) -> float:
         """``V = z' Z^-1 z`` at phase ``theta`` (linear interpolation of ``Z^-1``)."""
         th = self.theta
-        r = np.clip((theta - th[0]) / (th[1] - th[0]), 0, th.size - 1 - 1e-12)
+        r = min(max((theta - th[0]) / (th[1] - th[0]), 0.0), th.size - 1 - 1e-12)
         k = int(r)
         w = r - k
         Zm = (1 - w) * self.Zinv[k] + w * self.Zinv[k + 1]

@@ -37,9 +37,12 @@ def stance_from_contacts(
     (not produced by the simulator, whose double support is instantaneous, but possible on real
     hardware) the ``previous`` stance leg is kept, or leg A when there is none.
     """
+    fallback = 0 if previous is None else int(previous)
+    if isinstance(contact_a, float) and isinstance(contact_b, float):  # one reading (a tick)
+        a, b = contact_a > 0.5, contact_b > 0.5
+        return 0 if a and not b else 1 if b and not a else fallback
     a = np.asarray(contact_a) > 0.5
     b = np.asarray(contact_b) > 0.5
-    fallback = 0 if previous is None else int(previous)
     out = np.where(a & ~b, 0, np.where(b & ~a, 1, fallback))
     return int(out) if out.ndim == 0 else out
 
@@ -53,6 +56,11 @@ def encoders_to_q(
     Leg A in stance (0): ``q1 = hip``, ``q2 = leg_a``; leg B in stance (1): ``q1 = -hip``,
     ``q2 = leg_a - hip``.
     """
+    if isinstance(hip, float) and isinstance(leg_a, float) and isinstance(stance_leg, int):
+        # one reading (a tick): the same arithmetic without arrays
+        if stance_leg == 1:
+            return -float(hip), float(leg_a) - float(hip)
+        return float(hip), float(leg_a)
     b = np.asarray(stance_leg) == 1
     q1 = np.where(b, -np.asarray(hip), hip)
     q2 = np.where(b, np.asarray(leg_a) - np.asarray(hip), leg_a)
