@@ -145,20 +145,19 @@ def _residuals(
 
 @njit(cache=True)
 def _jacobian(
-    p, coefficients_too, P, index, nominal, free_index, ratio, prior, Q, U, bounds, dt, nsub, sig
+    p, P, index, nominal, free_index, ratio, prior, Q, U, bounds, dt, nsub, sig
 ):  # pragma: no cover - compiled
     """The residuals ``r`` at ``p`` and their forward-difference Jacobian in two blocks: ``Jt``
     by the fitted coefficients ``(m, nf)`` and ``Jd`` by the initial-state corrections ``(m,
     4)``, row ``i`` of ``Jd`` by those of the segment row ``i`` belongs to (zero on the
     prior's rows). A segment's residuals depend on the coefficients and its own initial state
-    only, so the k-th initial component of every segment moves at once. Without
-    ``coefficients_too`` ``Jt`` is left zero."""
+    only, so the k-th initial component of every segment moves at once."""
     args = (P, index, nominal, free_index, ratio, prior, Q, U, bounds, dt, nsub, sig)
     nf = free_index.size
     r0 = _residuals(p, *args)
-    Jt = np.zeros((r0.size, nf))
+    Jt = np.empty((r0.size, nf))
     Jd = np.zeros((r0.size, 4))
-    for j in range(nf if coefficients_too else 0):
+    for j in range(nf):
         h = 1e-7 * max(1.0, abs(p[j]))
         e = p.copy()
         e[j] += h
@@ -213,32 +212,23 @@ def _normal_equations(r, Jt, Jd, w_grad, w_hess, bounds):  # pragma: no cover - 
 
 
 def _fit_huber(
-    p0: np.ndarray,
-    scale: np.ndarray,
-    args: tuple,
-    coefficients_too: bool = True,
-    max_iter: int = 100,
-    tol: float = 1e-8,
+    p0: np.ndarray, scale: np.ndarray, args: tuple, max_iter: int = 100, tol: float = 1e-8
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """Levenberg-Marquardt on the Huber cost of :func:`_residuals` (scale ``ROBUST_SCALE``)
-    from ``p0``, damping scaled by ``scale`` (typical sizes of the unknowns); without
-    ``coefficients_too`` only the segments' initial states move. Stops when the cost falls
-    by less than ``tol`` relatively, the step is below ``tol`` relative to the point, or the
-    scaled gradient below ``tol``. Returns the point and the undamped blocks ``A, B, C`` of
+    from ``p0``, ``scale`` the typical sizes of the unknowns (the convergence tests', and the
+    floor of the damping, which is Marquardt's: the Hessian's diagonal). Stops when the cost
+    falls by less than ``tol`` relatively, the step is below ``tol`` relative to the point, or
+    the scaled gradient below ``tol``. Returns the point and the undamped blocks ``A, B, C`` of
     its Gauss-Newton Hessian (:func:`_normal_equations`)."""
     nf = args[3].size
-    S = args[8].size - 1
     bounds = args[8]
     x = p0.copy()
-    d_t, d_d = scale[:nf] ** -2.0, np.asarray(_INIT_SCALE) ** -2.0
-    d = np.concatenate([d_t, np.tile(d_d, S)])
-    free = np.ones(x.size) if coefficients_too else np.r_[np.zeros(nf), np.ones(4 * S)]
 
     def linearise(x: np.ndarray) -> tuple:
         # iteratively reweighted: the Hessian's weights are the gradient's (a residual beyond
         # the Huber threshold keeps its curvature, scaled down), which keeps the steps sane
         # where the start explains a segment badly
-        lin = _jacobian(x, coefficients_too, *args)
+        lin = _jacobian(x, *args)
         cost, wg, wh = _huber(lin[0], ROBUST_SCALE)
         return (cost, *_normal_equations(*lin, wg, wg, bounds), lin, wg, wh)
 
@@ -246,17 +236,14 @@ def _fit_huber(
     mu = 1e-3
     nu = 2.0
     for _ in range(max_iter):
-        g = np.concatenate([gt, gd.ravel()]) * free
+        g = np.concatenate([gt, gd.ravel()])
         if np.max(np.abs(g * scale)) < tol:
             break
         # Marquardt's damping: mu times the Hessian's diagonal (floored by the scales')
         d_t = np.maximum(np.diag(A), 1e-6 * scale[:nf] ** -2.0)
         d_d = np.maximum(np.einsum("sii->si", C), 1e-6 * np.asarray(_INIT_SCALE) ** -2.0)
         d = np.concatenate([d_t, d_d.ravel()])
-        if coefficients_too:
-            step_t, step_d = _schur_step(A, B, C, gt, gd, mu, d_t, d_d)
-        else:
-            step_t, step_d = np.zeros(nf), _segment_steps(C, gd, mu, d_d)
+        step_t, step_d = _schur_step(A, B, C, gt, gd, mu, d_t, d_d)
         step = np.concatenate([step_t, step_d.ravel()])
         if np.linalg.norm(step / scale) <= tol * (tol + np.linalg.norm(x / scale)):
             break
@@ -281,18 +268,9 @@ def _fit_huber(
 
 
 @njit(cache=True)
-def _segment_steps(C, gd, mu, dd_):  # pragma: no cover - compiled
-    """The Levenberg-Marquardt steps of the segments' initial states alone ``(S, 4)``."""
-    out = np.empty(gd.shape)
-    for s in range(gd.shape[0]):
-        out[s] = np.linalg.solve(C[s] + mu * np.diag(dd_[s]), -gd[s])
-    return out
-
-
-@njit(cache=True)
 def _schur_step(A, B, C, gt, gd, mu, dt_, dd_):  # pragma: no cover - compiled
     """The Levenberg-Marquardt step of the block system (``H + mu diag(D)``, ``D = dt_`` on the
-    coefficients and ``dd_`` on each segment's initial state), the segments eliminated by
+    coefficients and ``dd_[s]`` on segment ``s``'s initial state), the segments eliminated by
     their Schur complement; returns the steps of the coefficients ``(nf,)`` and of the
     segments ``(S, 4)``."""
     S = B.shape[0]

@@ -215,7 +215,7 @@ def test_block_solver_reaches_scipys_huber_minimum_and_covariance():
     assert cost <= ref.cost * (1 + 1e-8)  # the solver stops at a relative decrease of 1e-8
     nf = len(COEFFICIENTS) - 1
     # the dense Jacobian at the solution, scaled as scipy scales it for the Huber loss
-    r, Jt, Jd = _jacobian(x, True, *args)
+    r, Jt, Jd = _jacobian(x, *args)
     bounds = args[8]
     J = np.zeros((r.size, x.size))
     J[:, :nf] = Jt
