@@ -119,6 +119,16 @@ class PlannerConfig:
             (``agents.footstep.FootstepWrapper``); within +-0.1 m.
         candidates: footholds tried per step before giving up.
         candidate_spacing: least spacing between the footholds tried [m].
+        beam_width: when the depth-first search finds no plan over the horizon, a beam search
+            over footholds and sampled step shapes (:mod:`controllers.planner.beam`) keeps
+            this many branches per depth and returns the cheapest feasible sequence that spans
+            the horizon (else the deepest one, when deeper than the search's); 0 turns it off.
+        beam_footholds: candidate footholds a beam step tries (the ranked candidates, as
+            ``candidates`` for the depth-first search).
+        beam_speeds: shapes a beam step keeps per foothold besides the cheapest, spread over
+            the post-impact speeds they lead to (slowest to fastest).
+        beam_evaluations: step evaluations one beam search may spend (besides the
+            depth-first search's ``max_evaluations``; a deterministic bound).
 
     The swing-foot geometry is the robot's (:attr:`envs.physics.RobotParams.retract`,
     :attr:`~envs.physics.RobotParams.arm_distance`, the simulator's rule): the planned swing
@@ -174,6 +184,10 @@ class PlannerConfig:
     foothold_shift: float = 0.0
     candidates: int = 4
     candidate_spacing: float = 0.01
+    beam_width: int = 0
+    beam_footholds: int = 8
+    beam_speeds: int = 5
+    beam_evaluations: int = 40000
 
     def __new__(cls, *args: Any, **kwargs: Any) -> PlannerConfig:
         """Reject the settings that moved to :class:`envs.physics.RobotParams`, naming the
@@ -199,6 +213,10 @@ class PlannerConfig:
             "lookahead": 0,
             "energy_horizon": 0,
             "pairs_first": 0,
+            "beam_width": 0,
+            "beam_footholds": 1,
+            "beam_speeds": 0,
+            "beam_evaluations": 1,
         }
         for name, lo in ints.items():
             v = getattr(self, name)

@@ -202,6 +202,8 @@ class Plan:
         violations: per step, ``(worst, constraint)``: the most negative constraint value and
             the violated constraint's name (``(0.0, "")`` for a feasible step); a plan of the
             least-violating steps (:meth:`GaitPlanner.plan_least_violation`) may have some.
+        beam: the steps come from the beam search over the horizon (the depth-first search
+            found no plan; :attr:`PlannerConfig.beam_width`).
     """
 
     def __init__(self, steps: list[StepPlan], params: RobotParams, config: PlannerConfig):
@@ -212,6 +214,7 @@ class Plan:
         self.solve_time = math.nan
         self.evaluations = 0
         self.violations: list[tuple[float, str]] = [(0.0, "")] * len(self.steps)
+        self.beam = False
 
     def __len__(self) -> int:
         return len(self.steps)

@@ -469,6 +469,13 @@ class SearchBudget:
         self.exhausted = False
         self._deadline = time.process_time() + seconds if seconds > 0 else math.inf
 
+    def another(self, evaluations: int) -> SearchBudget:
+        """A budget of ``evaluations`` more step evaluations, bounded by this budget's deadline
+        (one planning call's second search)."""
+        out = SearchBudget(evaluations)
+        out._deadline = self._deadline
+        return out
+
     def spend(self, n: int) -> None:
         """Account for ``n`` evaluations about to be made.
 

@@ -16,6 +16,10 @@ replanning from the planned state re-solves only the newly added step), and a lo
 whose warm start (the previous plan's solution, or the second step of a jointly optimised pair)
 is still feasible is kept as it is: it is optimised when it becomes the first step of a plan
 from a state off the previous plan.
+
+When the depth-first search finds no plan over the horizon, the beam search of :mod:`.beam`
+(``PlannerConfig.beam_width``) searches footholds and step speeds over the whole horizon
+jointly; its plan, or its branch if deeper than the search's, is the call's result.
 """
 
 from __future__ import annotations
@@ -29,6 +33,7 @@ from envs.physics import model
 from envs.physics.params import RobotParams
 
 from ..bezier import BezierConstraint, chord_coefficients
+from .beam import beam_steps
 from .config import PlannerConfig, PlanningError
 from .footholds import FootholdChains, TerrainMap, touchdown_configuration
 from .plan import PeriodicGait, Plan, StepPlan
@@ -130,6 +135,7 @@ class StepSearch:
         # a step optimisation of this call has failed: from then on, when replanning (the
         # previous plan is there to fall back on), stalled SLSQP runs end early
         self.struggling = False
+        self.beam = False  # the plan came from the beam search over the horizon
 
     def run(
         self, start: tuple[float, float, float, float], stance: tuple[float, float]
@@ -154,7 +160,23 @@ class StepSearch:
             exc.partial = list(self.partial)
             exc.evaluations = self.evaluations.used
             exc.budget_exhausted = self.evaluations.exhausted
-            raise
+            if reach < H or self.config.beam_width == 0:
+                raise
+            # the footholds and speeds over the horizon searched jointly
+            steps, used, cut = beam_steps(self, start, stance)
+            self.evaluations.used += used
+            exc.evaluations = self.evaluations.used
+            exc.budget_exhausted |= cut
+            if len(steps) == H:
+                self.beam = True
+                return steps
+            if len(steps) <= len(exc.partial):
+                raise
+            # the beam got further: its deepest branch is the best plan found
+            deeper = PlanningError(len(steps), "no feasible step in the beam search", str(exc))
+            deeper.partial, deeper.evaluations = steps, exc.evaluations
+            deeper.budget_exhausted = exc.budget_exhausted
+            raise deeper from exc
 
     def _steps(self, j: int, start: tuple, stance: tuple[float, float]) -> list[StepPlan]:
         """Depth-first search over footholds: steps ``j .. H-1`` from ``start``."""

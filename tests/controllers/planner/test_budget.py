@@ -21,15 +21,18 @@ def failing_search(planner, gait, **kwargs):
 
 def test_the_evaluation_budget_bounds_a_failing_search(planners):
     gait = planners["paper"].periodic_gait()
-    # replanning (a previous plan to fall back on): the planner's budget applies
-    pl = GaitPlanner("paper", {"max_evaluations": 1000})
+    # replanning (a previous plan to fall back on): the planner's budget applies (to the
+    # depth-first search; the beam search after it has its own, test_beam.py)
+    pl = GaitPlanner("paper", {"max_evaluations": 1000, "beam_width": 0})
     previous = pl.plan(Terrain.flat(), (gait.q, gait.qd), (0.0, 0.0), horizon=4)
     cut = failing_search(pl, gait, previous_plan=previous)
     assert cut.budget_exhausted and "search budget exhausted" in str(cut)
     assert 1000 <= cut.evaluations < 1000 + LARGEST_BATCH
     # the same cut from the same inputs (a fresh planner: pl now holds reusable step solutions)
     again = failing_search(
-        GaitPlanner("paper", {"max_evaluations": 1000}), gait, previous_plan=previous
+        GaitPlanner("paper", {"max_evaluations": 1000, "beam_width": 0}),
+        gait,
+        previous_plan=previous,
     )
     assert (again.evaluations, again.step, str(again)) == (cut.evaluations, cut.step, str(cut))
     # a call may set its own budget (also for a plan from scratch)
