@@ -29,7 +29,7 @@ import numpy as np
 from ..bezier import BezierConstraint, chord_coefficients
 from .footholds import touchdown_configuration
 from .plan import StepPlan
-from .problem import BudgetExhausted, FixedStep, SearchBudget
+from .problem import BudgetExhausted, FixedStep, SearchBudget, shape_guess
 
 if TYPE_CHECKING:
     from .search import StepSearch
@@ -135,9 +135,8 @@ def _expand(search, br: _Branch, j: int, near, far, rel, budget: SearchBudget, l
             continue
         fx = FixedStep(th_p, a0, slope, thd, br.stance, fh, q2m, q1m, search._end_speed(fh, q1m))
         chord = q1m - a0
-        k = np.arange(cfg.order + 1)
-        gait_shape = (chord_coefficients(a0, q1m, k, cfg.order) + rel * chord)[2:-1]
-        base = chord_coefficients(a0, q1m, k[2:-1], cfg.order)
+        gait_shape = shape_guess(rel, a0, q1m, cfg.order)
+        base = chord_coefficients(a0, q1m, np.arange(2, cfg.order), cfg.order)
         X = np.vstack([gait_shape[None], gait_shape + chord * near, base + chord * far])
         try:
             budget.spend(X.shape[0])

@@ -27,9 +27,10 @@ from .problem import (
     BudgetExhausted,
     FixedStep,
     batch_row,
+    shape_guess,
     worst_violation,
 )
-from .search import StepSearch, _global_samples, _shape_guess
+from .search import StepSearch, _global_samples
 
 __all__ = ["VIOLATION_WEIGHTS", "least_violation_steps"]
 
@@ -144,7 +145,7 @@ def _minimise_violation(search: StepSearch, fx: FixedStep) -> tuple[dict, tuple[
 
     chord = fx.a_last - fx.a0
     base = chord_coefficients(fx.a0, fx.a_last, np.arange(2, order), order)
-    x0 = _shape_guess(sm.ref.shape, fx.a0, fx.a_last, order)
+    x0 = shape_guess(sm.ref.shape, fx.a0, fx.a_last, order)
     starts = np.vstack([x0, base + chord * _global_samples(order)])
     prob.evaluate_many(starts)
     xs = min(starts, key=score)

@@ -58,6 +58,7 @@ __all__ = [
     "batch_row",
     "constraint_layout",
     "gait_reference",
+    "shape_guess",
     "worst_violation",
 ]
 
@@ -427,6 +428,14 @@ class StepEvaluator:
             "thetadot_plus": out.thetadot_plus,
             "gain": out.gain,
         }
+
+
+def shape_guess(rel: np.ndarray, a0: float, a_last: float, order: int) -> np.ndarray:
+    """The free coefficients ``a_2 .. a_{M-1}`` of the shape ``rel`` (all coefficients relative
+    to the chord, as :attr:`GaitReference.shape`) on a step from ``a_0`` to ``a_M`` [rad]."""
+    k = np.arange(order + 1)
+    base = chord_coefficients(a0, a_last, k, order)
+    return (base + rel * (a_last - a0))[2:-1]
 
 
 def batch_row(ev: dict[str, Any], r: int) -> dict[str, Any]:

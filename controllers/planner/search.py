@@ -45,6 +45,7 @@ from .problem import (
     StepEvaluator,
     batch_row,
     gait_reference,
+    shape_guess,
     worst_violation,
 )
 
@@ -254,7 +255,7 @@ class StepSearch:
                 best_fail = max(best_fail, (-1.0, "theta increases over the step", f"{fh}"))
                 continue
             fx = FixedStep(th_p, a0, slope, thd, stance, fh, q2m, q1m, self._end_speed(fh, q1m))
-            x0 = _shape_guess(sm.ref.shape, a0, q1m, cfg.order)
+            x0 = shape_guess(sm.ref.shape, a0, q1m, cfg.order)
             hint = memo.hints.get(_hint_key(stance, fh))
             solved = True  # the warm start is an optimised solution
             if warm and abs(warm[0].foothold[0] - fh[0]) < cfg.rules().resolution:
@@ -369,7 +370,7 @@ class StepSearch:
             return None
         end = self._end_speed(fh2, q1n)
         fx2 = FixedStep(th_p2, -q1m, math.nan, math.nan, fh, fh2, q2n, q1n, end)
-        return fx2, _shape_guess(self.model.ref.shape, -q1m, q1n, cfg.order)
+        return fx2, shape_guess(self.model.ref.shape, -q1m, q1n, cfg.order)
 
     def _problem_key(self, fx: FixedStep, fx2: FixedStep | None) -> tuple:
         """Everything a step problem (or a pair) depends on besides the planner itself."""
@@ -523,9 +524,3 @@ def _global_samples(order: int) -> np.ndarray:
     from scipy.stats import qmc  # deferred: scipy.stats is slow to import, rarely needed
 
     return -1.0 + 3.5 * qmc.Sobol(order - 2, seed=0).random(64)
-
-
-def _shape_guess(rel: np.ndarray, a0: float, a_last: float, order: int) -> np.ndarray:
-    k = np.arange(order + 1)
-    base = chord_coefficients(a0, a_last, k, order)
-    return (base + rel * (a_last - a0))[2:-1]
