@@ -141,7 +141,8 @@ def _minimise_violation(search: StepSearch, fx: FixedStep) -> tuple[dict, tuple[
 
     def score(x):
         c, g, _, _ = prob.get(x)
-        return (float(np.sum(np.minimum(g, 0.0) ** 2)), c)
+        with np.errstate(over="ignore"):  # far outside the constraints: inf
+            return (float(np.sum(np.minimum(g, 0.0) ** 2)), c)
 
     chord = fx.a_last - fx.a0
     base = chord_coefficients(fx.a0, fx.a_last, np.arange(2, order), order)

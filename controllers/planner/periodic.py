@@ -18,7 +18,14 @@ from ..bezier import BezierConstraint
 from .config import PlannerConfig, PlanningError
 from .footholds import TerrainMap, touchdown_configuration
 from .plan import PeriodicGait, StepPlan
-from .problem import BatchProblem, FixedStep, StepEvaluator, batch_row, worst_violation
+from .problem import (
+    BatchProblem,
+    FixedStep,
+    StepEvaluator,
+    batch_row,
+    violation,
+    worst_violation,
+)
 
 __all__ = ["GaitCache", "solve_periodic_gait"]
 
@@ -82,9 +89,7 @@ def solve_periodic_gait(
     starts = base + 2.0 * q1m * samples
     evs = sm.evaluate_batch(fx, starts, periodic=True)
     gall = np.concatenate(evs["groups"], axis=1)
-    viol = np.where(
-        np.all(np.isfinite(gall), axis=1), np.sum(np.minimum(gall, 0.0), axis=1), -np.inf
-    )
+    viol = np.where(np.all(np.isfinite(gall), axis=1), -violation(gall, axis=1), -np.inf)
     scores = list(zip(viol.tolist(), evs["cost"].tolist()))
     ranked = sorted(range(len(samples)), key=lambda i: (scores[i][0], -scores[i][1]))[::-1]
     best_x, best_key = None, None

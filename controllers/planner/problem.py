@@ -59,6 +59,7 @@ __all__ = [
     "constraint_layout",
     "gait_reference",
     "shape_guess",
+    "violation",
     "worst_violation",
 ]
 
@@ -161,6 +162,14 @@ class ConstraintGroups:
 
     def __iter__(self):
         return (self[i] for i in range(len(self)))
+
+
+def violation(g: np.ndarray, axis: int | None = None) -> np.ndarray | float:
+    """The total constraint violation of constraint values ``g``: the sum of the negative
+    values' magnitudes (0 when feasible; ``inf`` where the sum overflows, a point far outside
+    the constraints, rather than a warning), over ``axis`` (None: all)."""
+    with np.errstate(over="ignore"):
+        return -np.sum(np.minimum(g, 0.0), axis=axis)
 
 
 def worst_violation(groups: list[np.ndarray]) -> tuple[float, str]:
@@ -585,7 +594,7 @@ class BatchProblem:
 
         def stop_when_stalled(intermediate_result):
             g = self.get(intermediate_result.x)[1]
-            hist.append(float(-np.sum(np.minimum(g, 0.0))))
+            hist.append(float(violation(g)))
             w = _STALL_WINDOW
             if len(hist) >= _STALL_ITERATIONS and hist[-1] > _STALL_VIOLATION:
                 if min(hist[-w:]) > _STALL_GAIN * min(hist[:-w]):  # no progress to feasibility

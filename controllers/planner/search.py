@@ -46,6 +46,7 @@ from .problem import (
     batch_row,
     gait_reference,
     shape_guess,
+    violation,
     worst_violation,
 )
 
@@ -472,14 +473,13 @@ class StepSearch:
         )
         samples = _global_samples(self.config.order)
         scores = [
-            (float(np.sum(np.minimum(g, 0.0))), -c)
-            for c, g, _, _ in prob.evaluate_many(base + chord * samples)
+            (-float(violation(g)), -c) for c, g, _, _ in prob.evaluate_many(base + chord * samples)
         ]
         best = max(range(len(samples)), key=lambda i: scores[i])
         ev2, ok2 = run(base + chord * samples[best])
         if ok2:
             memo.solved[key] = ev2["a"][2:-1].copy()
-        if ok2 or np.sum(np.minimum(ev2["g"], 0)) > np.sum(np.minimum(ev["g"], 0)):
+        if ok2 or violation(ev2["g"]) < violation(ev["g"]):
             ev = ev2
         if not ok2:
             memo.failed[key] = ev

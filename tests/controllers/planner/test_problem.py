@@ -1,5 +1,7 @@
 """The step problem: batched evaluation, the constraint-group table and its layout."""
 
+import warnings
+
 import numpy as np
 import pytest
 
@@ -12,6 +14,7 @@ from controllers.planner.problem import (
     StepEvaluator,
     constraint_layout,
     gait_reference,
+    violation,
     worst_violation,
 )
 
@@ -131,3 +134,12 @@ def test_the_swing_foot_geometry_is_the_robots(planners):
     assert sm.settings.retract == 0.08 * robot.l and sm.settings.arm == 0.3 * robot.l
     default = StepEvaluator(pl.params, pl.config, TerrainMap("flat")).settings
     assert (default.retract, default.arm) == (0.05 * robot.l, 0.1 * robot.l)
+
+
+def test_the_total_violation_is_infinite_without_a_warning_where_its_sum_overflows():
+    g = np.array([[0.5, -0.25, -1.0], [1.0, 2.0, 0.0], [-1e308, -1e308, 1.0]])
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")  # SLSQP's stall test met such points: one warning each
+        assert violation(g[0]) == 1.25 and violation(g[1]) == 0.0
+        assert violation(g[2]) == np.inf
+        np.testing.assert_array_equal(violation(g, axis=1), [1.25, 0.0, np.inf])
