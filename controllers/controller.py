@@ -583,7 +583,7 @@ class TransverseController:
             rec.fallback = None if level is None and name == "full problem" else name
             if plan.steps[0].note:
                 notes.append(f"{name}: {plan.steps[0].note}")
-            if getattr(plan, "beam", False):
+            if plan.beam:
                 notes.append(f"{name}: beam search over the horizon")
             rec.reason = " | ".join(notes) or None
             return plan.steps

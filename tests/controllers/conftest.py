@@ -7,6 +7,7 @@ from controllers.bezier import BezierConstraint
 from controllers.reduced import impact_along_constraint
 from controllers.transverse import StepModel
 from envs.physics.params import RobotParams
+from envs.physics.terrain import Terrain
 
 
 def flat_chain(robot="paper", th0=0.2, nsteps=3, td_plus=1.3, slope_minus=1.6, order=4):
@@ -42,3 +43,28 @@ def state_from_z():
         return np.array([c.phi(theta) + z[1], theta, c.dphi(theta) * td + z[2], td])
 
     return f
+
+
+class RiseAfterDrops:
+    """Random blocks at difficulty 2 (a validation course of the reference policy): three drops
+    of 6, 11 and 14 mm, then a 13 mm rise on a block 0.22 m wide; and the post-impact ``state``
+    with its ``stance`` foot [m] of the footstep where the replanning search first found only
+    three of its four steps (the robot descending at 0.89 rad/s)."""
+
+    edges = [0.3, 0.4752, 0.7189, 0.8735, 1.0909, 1.3786, 1.598, 1.8576]
+    heights = [0.0, -0.00598, -0.01735, -0.03164, -0.01885, -0.02697, -0.0339, -0.02885, -0.02642]
+    state = (
+        (-0.39099489784414365, -0.1923186271042424),
+        (-0.028842415109954597, 0.889456164095743),
+    )
+    stance = (0.27751934145834933, 0.0)
+
+    def terrain(self, shift: float = 0.0) -> Terrain:
+        """The course, moved by ``-shift`` [m] (``shift = stance[0]`` puts the stance foot at
+        x = 0)."""
+        return Terrain.stairs([e - shift for e in self.edges], np.diff(self.heights).tolist())
+
+
+@pytest.fixture(scope="session")
+def rise_after_drops():
+    return RiseAfterDrops()

@@ -116,3 +116,30 @@ def test_a_stance_foot_between_foothold_windows_walks_on_with_relaxed_riser_marg
     assert out["failure"] is None and len(out["impacts"]) >= 5
     assert all(r.fallback != "zero input" for r in out["records"])
     assert ctrl._stance[1] == pytest.approx(-0.06)  # on the lower tread
+
+
+def test_the_beam_search_keeps_walking_where_the_depth_first_search_runs_into_a_rise(
+    rise_after_drops,
+):
+    """The constructed course of ``tests/controllers/planner/test_beam.py`` (three drops, then a
+    13 mm rise; a validation course at difficulty 2), walked from the state where the
+    depth-first search first planned only three of four steps: without the beam search the
+    look-ahead shrinks step after step, then least-violating steps, then a trip; with it the
+    plans span the horizon and the robot walks on over the rise."""
+    c = rise_after_drops
+    course = c.terrain(shift=c.stance[0])  # the stance foot at x = 0, where rollouts start
+    q, qd = np.array(c.state[0]), np.array(c.state[1])
+    outs = {}
+    for width in (32, 0):
+        ctrl = TransverseController("paper", course, ControllerConfig(), {"beam_width": width})
+        outs[width] = ctrl.rollout(q, qd, 6.0, steps=8)
+    beam, dfs = outs[32], outs[0]
+    assert beam["failure"] is None and len(beam["impacts"]) >= 7
+    assert any("beam search over the horizon" in (r.reason or "") for r in beam["records"])
+    assert all(r.fallback is None for r in beam["records"])
+    assert dfs["failure"] == "trip" and len(dfs["impacts"]) < 5
+    assert [r.fallback for r in dfs["records"][:3]] == [
+        "shorter horizon",
+        "shorter horizon",
+        "least violation",
+    ]
