@@ -51,12 +51,14 @@ previous plan were feasible with the full settings and keep the transverse feedb
 
 Within the full problem and each relaxation, a search that fails beyond the second step keeps
 the feasible steps before the failure (``"shorter horizon"``, or the relaxation's name followed
-by ``", shorter horizon"``). When none gives two steps, a single step (the first feasible
-step found, else what is left of the previous plan) is held with PD on ``y`` (``fallback = "PD
-on the last planned step"``; also when the Riccati solve over the look-ahead fails, and a step
-whose transverse model cannot be built ends the look-ahead); zero input (``fallback = "zero
-input"``) remains only when there is nothing at all to track (e.g. a non-finite state, or
-``theta_dot`` already not positive).
+by ``", shorter horizon"``); where the planner's beam search over the horizon
+(``PlannerConfig.beam_width``) is on, it runs first when the depth-first search fails, and its
+plan over the whole horizon is tracked as a full plan (the record's reason says so). When none
+gives two steps, a single step (the first feasible step found, else what is left of the
+previous plan) is held with PD on ``y`` (``fallback = "PD on the last planned step"``; also
+when the Riccati solve over the look-ahead fails, and a step whose transverse model cannot be
+built ends the look-ahead); zero input (``fallback = "zero input"``) remains only when there is
+nothing at all to track (e.g. a non-finite state, or ``theta_dot`` already not positive).
 The step's :class:`StepRecord` says which, and why (``reason``: every degradation tried, with
 its planning error).
 """
