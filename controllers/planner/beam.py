@@ -29,7 +29,7 @@ import numpy as np
 from ..bezier import BezierConstraint, chord_coefficients
 from .footholds import touchdown_configuration
 from .plan import StepPlan
-from .problem import BudgetExhausted, FixedStep, SearchBudget, shape_guess
+from .problem import MIN_PHASE_SPAN, BudgetExhausted, FixedStep, SearchBudget, shape_guess
 
 if TYPE_CHECKING:
     from .search import StepSearch
@@ -131,7 +131,7 @@ def _expand(search, br: _Branch, j: int, near, far, rel, budget: SearchBudget, l
     for i in order:
         fh = (float(cx[i]), float(cy[i]))
         q1m, q2m = touchdown_configuration(fh[0] - br.stance[0], fh[1] - br.stance[1], l)
-        if not q2m > th_p + 0.05:
+        if not q2m > th_p + MIN_PHASE_SPAN:
             continue
         fx = FixedStep(th_p, a0, slope, thd, br.stance, fh, q2m, q1m, search._end_speed(fh, q1m))
         chord = q1m - a0

@@ -23,6 +23,7 @@ from .footholds import touchdown_configuration
 from .plan import StepPlan
 from .problem import (
     CONSTRAINT_GROUPS,
+    MIN_PHASE_SPAN,
     BatchProblem,
     BudgetExhausted,
     FixedStep,
@@ -97,7 +98,7 @@ def _least_violating_step(
     for i in order:
         fh = (float(cx[i]), float(cy[i]))
         q1m, q2m = touchdown_configuration(fh[0] - stance[0], fh[1] - stance[1], l)
-        if not q2m > th_p + 0.05:
+        if not q2m > th_p + MIN_PHASE_SPAN:
             continue
         fx = FixedStep(th_p, a0, slope, thd, stance, fh, q2m, q1m, search._end_speed(fh, q1m))
         ev, score = _minimise_violation(search, fx)

@@ -45,6 +45,7 @@ from .plan import PeriodicGait
 
 __all__ = [
     "CONSTRAINT_GROUPS",
+    "MIN_PHASE_SPAN",
     "BatchProblem",
     "BudgetExhausted",
     "ConstraintGroup",
@@ -69,6 +70,9 @@ _PACK_BLOCK = 8  # long constraint groups reach SLSQP as minima over blocks of g
 # brought the violation below _STALL_GAIN times its earlier best no more
 _STALL_ITERATIONS, _STALL_WINDOW, _STALL_GAIN, _STALL_VIOLATION = 25, 5, 0.95, 1e-4
 _FD_STEP = math.sqrt(np.finfo(float).eps)  # forward-difference step of the Jacobians
+#: least phase range ``theta- - theta+`` of a step to a candidate foothold [rad]; footholds
+#: closer are not tried
+MIN_PHASE_SPAN = 0.05
 
 
 # ---------------------------------------------------------------------------- constraint groups

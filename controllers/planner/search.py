@@ -38,6 +38,7 @@ from .config import PlannerConfig, PlanningError
 from .footholds import FootholdChains, TerrainMap, touchdown_configuration
 from .plan import PeriodicGait, Plan, StepPlan
 from .problem import (
+    MIN_PHASE_SPAN,
     BatchProblem,
     BudgetExhausted,
     FixedStep,
@@ -252,7 +253,7 @@ class StepSearch:
             self.fresh = False  # set when an optimisation runs (reused solutions cost nothing)
             fh = (float(cx[i]), float(cy[i]))
             q1m, q2m = touchdown_configuration(fh[0] - stance[0], fh[1] - stance[1], l)
-            if not q2m > th_p + 0.05:
+            if not q2m > th_p + MIN_PHASE_SPAN:
                 best_fail = max(best_fail, (-1.0, "theta increases over the step", f"{fh}"))
                 continue
             fx = FixedStep(th_p, a0, slope, thd, stance, fh, q2m, q1m, self._end_speed(fh, q1m))
@@ -367,7 +368,7 @@ class StepSearch:
             return None
         fh2 = (float(cx[0]), float(cy[0]))
         q1n, q2n = touchdown_configuration(fh2[0] - fh[0], fh2[1] - fh[1], l)
-        if not q2n > th_p2 + 0.05:
+        if not q2n > th_p2 + MIN_PHASE_SPAN:
             return None
         end = self._end_speed(fh2, q1n)
         fx2 = FixedStep(th_p2, -q1m, math.nan, math.nan, fh, fh2, q2n, q1n, end)
