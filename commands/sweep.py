@@ -9,14 +9,14 @@ and every policy on it built once) before any episode runs.
 
 Episodes are appended to OUT/episodes.jsonl as they finish (one JSON object each). Run the same
 command again after an interruption: finished episodes are kept and only the others run. A
-different spec in the same --out is refused unless --overwrite. At the end OUT/summary.json and
-OUT/summary.csv hold per cell the success rate with its Wilson interval, the mean footsteps,
-distance, speed and the cost of transport with bootstrap intervals, the median and 95th
-percentile of the episodes' largest stance-foot estimate errors (policies that estimate the
-foot), and the failure reasons;
-with groups of training seeds in the spec, the IQM of each group's success rates with a
-stratified-bootstrap interval and the probability of improvement between groups. OUT/plots/
-holds the success rate against each swept numeric argument.
+different spec in the same --out is refused unless --overwrite. At the end OUT/summary.json,
+OUT/summary.csv and OUT/summary.md (a Markdown table) hold per cell the success rate with its
+Wilson interval, the mean footsteps, distance, speed and the cost of transport with bootstrap
+intervals, the median and 95th percentile of the episodes' largest stance-foot estimate errors
+(policies that estimate the foot), and the failure reasons; with groups of training seeds in
+the spec, the IQM of each group's success rates with a stratified-bootstrap interval and the
+probability of improvement between groups. OUT/plots/ holds the success rate against each swept
+numeric argument.
 
 --backend ray runs tasks (a cell's run of up to 10 seeds) on a local Ray instance with --workers
 CPUs, or on the cluster at --address (its nodes need this package installed); it needs the

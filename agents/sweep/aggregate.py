@@ -35,6 +35,7 @@ from agents.stats import (
     wilson_interval,
 )
 from agents.sweep.spec import Cell
+from agents.sweep.store import SUMMARY_CSV, SUMMARY_JSON, SUMMARY_MD
 
 #: metrics averaged per cell: (record field, summary name)
 MEANS = (
@@ -216,10 +217,70 @@ def summary_csv(summary: dict[str, Any]) -> str:
     return buf.getvalue()
 
 
-def write_summary(summary: dict[str, Any], out: str | Path) -> tuple[Path, Path]:
-    """Write ``summary.json`` and ``summary.csv`` in the folder ``out`` (each all or nothing);
-    returns their paths."""
+def _interval(value: float | None, ci: Sequence[float] | None, digits: int) -> str:
+    """``value [low, high]`` with ``digits`` decimals ("-" without a value)."""
+    if value is None:
+        return "-"
+    text = f"{value:.{digits}f}"
+    return f"{text} [{ci[0]:.{digits}f}, {ci[1]:.{digits}f}]" if ci else text
+
+
+def summary_markdown(summary: dict[str, Any]) -> str:
+    """The cell summaries as a Markdown table (one row per cell, in grid order: success as
+    ``k/n (low-high %)`` with its Wilson interval, the means and the cost of transport with
+    their bootstrap intervals, the failure reasons), then, with groups of training seeds, the
+    IQM per group and the probability of improvement per pair of groups."""
+    level = round(100 * summary.get("confidence", CONFIDENCE))
+    lines = [
+        f"| env | policy | success ({level} % interval) | footsteps | distance [m] "
+        "| speed [m/s] | CoT | failures |",
+        "|---|---|---|---:|---:|---:|---:|---|",
+    ]
+    for c in summary["cells"]:
+        lo, hi = c["success_rate_ci"]
+        env = c["env"] + (
+            " (" + ", ".join(f"{k}={v}" for k, v in c["swept"].items()) + ")" if c["swept"] else ""
+        )
+        failures = ", ".join(f"{k} {v}" for k, v in c["failure_reasons"].items()) or "-"
+        lines.append(
+            f"| {env} | {c['policy']} | {c['successes']}/{c['episodes']} "
+            f"({100 * lo:.0f}-{100 * hi:.0f} %) "
+            f"| {_interval(c['mean_footsteps'], c['mean_footsteps_ci'], 1)} "
+            f"| {_interval(c['mean_distance'], c['mean_distance_ci'], 2)} "
+            f"| {_interval(c['mean_speed'], c['mean_speed_ci'], 3)} "
+            f"| {_interval(c['cost_of_transport'], c['cost_of_transport_ci'], 3)} "
+            f"| {failures} |"
+        )
+    seeds = summary.get("across_seeds")
+    if seeds:
+        lines += [
+            "",
+            f"| group | tasks | runs | IQM of the success rate ({level} % interval) |",
+            "|---|---:|---:|---|",
+        ]
+        for g in seeds["groups"]:
+            lines.append(
+                f"| {g['group']} | {g['tasks']} | {g['runs']} "
+                f"| {_interval(g['iqm'], g['iqm_ci'], 2)} |"
+            )
+        if seeds["improvement"]:
+            lines += [
+                "",
+                f"| x | y | P(x better than y) ({level} % interval) |",
+                "|---|---|---|",
+            ]
+            for p in seeds["improvement"]:
+                lines.append(
+                    f"| {p['x']} | {p['y']} | {_interval(p['p_x_better'], p['p_x_better_ci'], 2)} |"
+                )
+    return "\n".join(lines) + "\n"
+
+
+def write_summary(summary: dict[str, Any], out: str | Path) -> tuple[Path, Path, Path]:
+    """Write ``summary.json``, ``summary.csv`` and ``summary.md`` in the folder ``out`` (each
+    all or nothing); returns their paths."""
     out = Path(out)
-    js = atomic_write_text(out / "summary.json", json.dumps(summary, indent=2) + "\n")
-    cs = atomic_write_text(out / "summary.csv", summary_csv(summary))
-    return js, cs
+    js = atomic_write_text(out / SUMMARY_JSON, json.dumps(summary, indent=2) + "\n")
+    cs = atomic_write_text(out / SUMMARY_CSV, summary_csv(summary))
+    md = atomic_write_text(out / SUMMARY_MD, summary_markdown(summary))
+    return js, cs, md

@@ -5,7 +5,8 @@
 - ``episodes.jsonl``: one record per finished episode (see :mod:`agents.sweep.tasks`),
   appended and flushed as episodes finish, in the order they finish. A line cut short by an
   interruption is dropped when the folder is opened again; the episode is then run again.
-- ``summary.json``, ``summary.csv``, ``plots/``: written from the records at the end.
+- ``summary.json``, ``summary.csv``, ``summary.md`` (a Markdown table), ``plots/``: written
+  from the records at the end.
 """
 
 from __future__ import annotations
@@ -25,8 +26,9 @@ SPEC_FILE = "spec.json"
 EPISODES_FILE = "episodes.jsonl"
 SUMMARY_JSON = "summary.json"
 SUMMARY_CSV = "summary.csv"
+SUMMARY_MD = "summary.md"
 PLOTS_DIR = "plots"
-OUTPUTS = (SPEC_FILE, EPISODES_FILE, SUMMARY_JSON, SUMMARY_CSV)
+OUTPUTS = (SPEC_FILE, EPISODES_FILE, SUMMARY_JSON, SUMMARY_CSV, SUMMARY_MD)
 
 
 def spec_identity(spec: SweepSpec) -> dict[str, Any]:

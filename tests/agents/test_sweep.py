@@ -6,6 +6,7 @@ import numpy as np
 import pytest
 
 from agents.sweep import make_tasks, read_records, run_sweep, spec_from_dict, summarize_sweep
+from agents.sweep.aggregate import summary_markdown
 from agents.sweep.plots import plot_sweep, success_curves
 from agents.sweep.store import EPISODES_FILE
 
@@ -63,6 +64,11 @@ def test_records_and_summary(small_sweep):
     assert saved["cells"] == result.summary["cells"]
     csv_lines = (out / "summary.csv").read_text().splitlines()
     assert len(csv_lines) == 5 and "success_rate_low" in csv_lines[0]
+    # the Markdown table: a header, its rule and one row per cell, in grid order
+    md = (out / "summary.md").read_text().splitlines()
+    assert len(md) == 6 and md[0].startswith("| env | policy | success (95 % interval)")
+    row = next(line for line in md if line.startswith("| rough (difficulty=1) | passive |"))
+    assert "| 0/3 (0-56 %) |" in row and row.endswith("| trip 3 |")
     assert [p.name for p in result.plots] == ["success_rough_difficulty.png"]
 
 
@@ -164,6 +170,11 @@ def test_across_training_seeds():
     assert lo <= groups["bad"]["iqm"] <= hi < 0.9
     (pair,) = summary["across_seeds"]["improvement"]
     assert (pair["x"], pair["y"], pair["p_x_better"]) == ("good", "bad", 1.0)
+    # the Markdown summary: 12 cells, then the groups' IQM and the pair's improvement
+    md = summary_markdown(summary).splitlines()
+    assert md[2].startswith("| a | good s0 | 18/20 (70-97 %) | ")
+    assert "| good | 2 | 3 | 0.90 [0.90, 0.90] |" in md
+    assert "| good | bad | 1.00 [1.00, 1.00] |" in md
     # no groups: no across-seeds part
     plain = spec_from_dict({"episodes": 20, "policies": ["pd"], "envs": envs})
     one = fake_records(plain.cells()[0], 5, 20)
