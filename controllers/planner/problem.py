@@ -70,6 +70,7 @@ _PACK_BLOCK = 8  # long constraint groups reach SLSQP as minima over blocks of g
 # brought the violation below _STALL_GAIN times its earlier best no more
 _STALL_ITERATIONS, _STALL_WINDOW, _STALL_GAIN, _STALL_VIOLATION = 25, 5, 0.95, 1e-4
 _FD_STEP = math.sqrt(np.finfo(float).eps)  # forward-difference step of the Jacobians
+_PROBLEMS_KEPT = 16  # step problems whose kernel data a StepEvaluator keeps
 #: least phase range ``theta- - theta+`` of a step to a candidate foothold [rad]; footholds
 #: closer are not tried
 MIN_PHASE_SPAN = 0.05
@@ -265,6 +266,7 @@ class StepEvaluator:
         self.wscale = 1.0
         self._face_cache: dict[tuple, tuple[StepGround, float, float]] = {}
         self._layouts: dict[tuple, ConstraintLayout] = {}
+        self._problems: dict[tuple, tuple] = {}  # see _problem_data
         settings = StepSettings(
             min_thetadot=config.min_thetadot,
             alpha_scale=alpha_scale,
@@ -364,11 +366,15 @@ class StepEvaluator:
             self._face_cache[key] = out
         return out
 
-    def _evaluate(self, fx, free, periodic, slope_in, thd_in) -> dict[str, Any]:
+    def _problem_data(self, fx: FixedStep, periodic: bool) -> tuple:
+        """What the kernel needs of the step problem besides its shapes: ``(scalars, ground,
+        layout, shape_ref)``, the same for every batch of one problem (kept for the last few
+        problems: an optimisation evaluates the same one, or a pair, many times)."""
+        key = (id(fx), periodic, self.wscale, id(self.ref))
+        hit = self._problems.get(key)
+        if hit is not None and hit[0] is fx and hit[1] is self.ref:
+            return hit[2]
         cfg, grids = self.cfg, self.grids
-        nb = free.shape[0]
-        a = np.ascontiguousarray(self.coeffs(fx, free, periodic, slope_in))
-        span = fx.theta_minus - fx.theta_plus
         xs, ys = fx.stance
         ground, slope_stance, slope_foot = self._faces(xs, fx.foothold[0])
         n_faces = ground.face_x.size
@@ -383,7 +389,7 @@ class StepEvaluator:
         thm_ref = slope_ref = delta_ref = 0.0
         if self.ref is None:  # periodic gait: speed target and effort
             v_target = cfg.target_speed
-            shape_ref = np.zeros(a.shape[1])
+            shape_ref = np.zeros(cfg.order + 1)
         else:  # steps: the periodic gait's speed, end speed and shape (zero cost on the gait)
             thm_ref, slope_ref, shape_ref, v_target, delta_ref = self.ref
             if math.isfinite(fx.thetadot_minus_ref):
@@ -396,14 +402,29 @@ class StepEvaluator:
             slope_foot=slope_foot,
             foot_x=fx.foothold[0],
             theta_plus=fx.theta_plus,
-            span=span,
+            span=fx.theta_minus - fx.theta_plus,
             wscale=self.wscale,
             v_target=v_target,
             thetadot_minus_ref=thm_ref,
             slope_ref=slope_ref,
             delta_ref=delta_ref,
         )
-        scalars = StepScalars(*(float(v) for v in scalars))
+        data = (
+            StepScalars(*(float(v) for v in scalars)),
+            ground,
+            layout,
+            np.ascontiguousarray(shape_ref, dtype=np.float64),
+        )
+        if len(self._problems) >= _PROBLEMS_KEPT:
+            self._problems.clear()
+        self._problems[key] = (fx, self.ref, data)
+        return data
+
+    def _evaluate(self, fx, free, periodic, slope_in, thd_in) -> dict[str, Any]:
+        grids = self.grids
+        nb = free.shape[0]
+        a = np.ascontiguousarray(self.coeffs(fx, free, periodic, slope_in))
+        scalars, ground, layout, shape_ref = self._problem_data(fx, periodic)
         if periodic or thd_in is None:
             thd_plus = np.full(nb, float(fx.thetadot_plus))
         else:
@@ -415,7 +436,7 @@ class StepEvaluator:
             thd_plus,
             periodic,
             self.ref is not None,
-            np.ascontiguousarray(shape_ref, dtype=np.float64),
+            shape_ref,
             self.settings,
             scalars,
             grids,
