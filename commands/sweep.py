@@ -41,6 +41,7 @@ from rich.markup import escape
 from rich.table import Table
 
 from agents.sweep import load_spec, run_sweep
+from agents.sweep.aggregate import COLUMNS, cell_row, interval_text
 from commands.cli import (
     CONTROLLER_KERNELS,
     SIMULATOR_KERNELS,
@@ -70,44 +71,6 @@ def configure(parser: argparse.ArgumentParser) -> None:
     )
     parser.add_argument("--no-plot", action="store_true", help="write no plots")
     parser.add_argument("--no-progress", action="store_true", help="no progress bar")
-
-
-def _interval(value: Any, ci: Any, spec: str, scale: float = 1.0) -> str:
-    """``value [low, high]`` formatted with ``spec`` (``-`` for None)."""
-    if value is None:
-        return "-"
-    text = format(scale * value, spec)
-    if ci:
-        text += f" [{format(scale * ci[0], spec)}, {format(scale * ci[1], spec)}]"
-    return text
-
-
-COLUMNS = (
-    "policy",
-    "env",
-    "success [%]",
-    "footsteps",
-    "distance [m]",
-    "speed [m/s]",
-    "CoT",
-    "failures",
-)
-
-
-def cell_row(c: dict[str, Any]) -> list[str]:
-    """The table row of a cell summary ``c`` (intervals in brackets)."""
-    swept = ", ".join(f"{k}={v}" for k, v in c["swept"].items())
-    return [
-        c["policy"],
-        c["env"] + (f" ({swept})" if swept else ""),
-        f"{_interval(c['success_rate'], c['success_rate_ci'], '.0f', 100)} "
-        f"({c['successes']}/{c['episodes']})",
-        _interval(c["mean_footsteps"], c["mean_footsteps_ci"], ".1f"),
-        _interval(c["mean_distance"], c["mean_distance_ci"], ".2f"),
-        _interval(c["mean_speed"], c["mean_speed_ci"], ".3f"),
-        _interval(c["cost_of_transport"], c["cost_of_transport_ci"], ".3f"),
-        ", ".join(f"{k} {v}" for k, v in c["failure_reasons"].items()) or "-",
-    ]
 
 
 def _pack(items: list[str], width: int, indent: str) -> list[str]:
@@ -169,13 +132,13 @@ def render_summary(summary: dict[str, Any], width: int = 100, terminal: bool = T
         lines = ["across training seeds, success rate [%]: IQM over runs and envs [95 % CI]"]
         for g in seeds_part["groups"]:
             lines.append(
-                f"  {g['group']}: {_interval(g['iqm'], g['iqm_ci'], '.0f', 100)} "
+                f"  {g['group']}: {interval_text(g['iqm'], g['iqm_ci'], '.0f', 100)} "
                 f"({g['runs']} runs, {g['tasks']} envs)"
             )
         for p in seeds_part["improvement"]:
             lines.append(
                 f"  P({p['x']} > {p['y']}) = "
-                f"{_interval(p['p_x_better'], p['p_x_better_ci'], '.2f')}"
+                f"{interval_text(p['p_x_better'], p['p_x_better_ci'], '.2f')}"
             )
         text += "\n".join(textwrap.fill(x, width, subsequent_indent="    ") for x in lines) + "\n"
     return text

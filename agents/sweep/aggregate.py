@@ -217,62 +217,71 @@ def summary_csv(summary: dict[str, Any]) -> str:
     return buf.getvalue()
 
 
-def _interval(value: float | None, ci: Sequence[float] | None, digits: int) -> str:
-    """``value [low, high]`` with ``digits`` decimals ("-" without a value)."""
+def interval_text(value: Any, ci: Any, spec: str, scale: float = 1.0) -> str:
+    """``value [low, high]`` formatted with ``spec`` (``-`` for None)."""
     if value is None:
         return "-"
-    text = f"{value:.{digits}f}"
-    return f"{text} [{ci[0]:.{digits}f}, {ci[1]:.{digits}f}]" if ci else text
+    text = format(scale * value, spec)
+    if ci:
+        text += f" [{format(scale * ci[0], spec)}, {format(scale * ci[1], spec)}]"
+    return text
+
+
+#: the columns of a cell's row in the summary tables (:func:`cell_row`)
+COLUMNS = (
+    "policy",
+    "env",
+    "success [%]",
+    "footsteps",
+    "distance [m]",
+    "speed [m/s]",
+    "CoT",
+    "failures",
+)
+
+
+def cell_row(c: dict[str, Any]) -> list[str]:
+    """The table row of a cell summary ``c`` (intervals in brackets)."""
+    swept = ", ".join(f"{k}={v}" for k, v in c["swept"].items())
+    return [
+        c["policy"],
+        c["env"] + (f" ({swept})" if swept else ""),
+        f"{interval_text(c['success_rate'], c['success_rate_ci'], '.0f', 100)} "
+        f"({c['successes']}/{c['episodes']})",
+        interval_text(c["mean_footsteps"], c["mean_footsteps_ci"], ".1f"),
+        interval_text(c["mean_distance"], c["mean_distance_ci"], ".2f"),
+        interval_text(c["mean_speed"], c["mean_speed_ci"], ".3f"),
+        interval_text(c["cost_of_transport"], c["cost_of_transport_ci"], ".3f"),
+        ", ".join(f"{k} {v}" for k, v in c["failure_reasons"].items()) or "-",
+    ]
+
+
+def _markdown(header: Sequence[str], rows: Sequence[Sequence[Any]]) -> list[str]:
+    """The lines of a Markdown table."""
+    return ["| " + " | ".join(map(str, r)) + " |" for r in (header, ["---"] * len(header), *rows)]
 
 
 def summary_markdown(summary: dict[str, Any]) -> str:
-    """The cell summaries as a Markdown table (one row per cell, in grid order: success as
-    ``k/n (low-high %)`` with its Wilson interval, the means and the cost of transport with
-    their bootstrap intervals, the failure reasons), then, with groups of training seeds, the
-    IQM per group and the probability of improvement per pair of groups."""
+    """The summary as Markdown: one row per cell, in grid order (:func:`cell_row`: success
+    with its Wilson interval, the means and the cost of transport with their bootstrap
+    intervals, the failure reasons); then, with groups of training seeds, the IQM per group and
+    the probability of improvement per pair of groups."""
     level = round(100 * summary.get("confidence", CONFIDENCE))
-    lines = [
-        f"| env | policy | success ({level} % interval) | footsteps | distance [m] "
-        "| speed [m/s] | CoT | failures |",
-        "|---|---|---|---:|---:|---:|---:|---|",
-    ]
-    for c in summary["cells"]:
-        lo, hi = c["success_rate_ci"]
-        env = c["env"] + (
-            " (" + ", ".join(f"{k}={v}" for k, v in c["swept"].items()) + ")" if c["swept"] else ""
-        )
-        failures = ", ".join(f"{k} {v}" for k, v in c["failure_reasons"].items()) or "-"
-        lines.append(
-            f"| {env} | {c['policy']} | {c['successes']}/{c['episodes']} "
-            f"({100 * lo:.0f}-{100 * hi:.0f} %) "
-            f"| {_interval(c['mean_footsteps'], c['mean_footsteps_ci'], 1)} "
-            f"| {_interval(c['mean_distance'], c['mean_distance_ci'], 2)} "
-            f"| {_interval(c['mean_speed'], c['mean_speed_ci'], 3)} "
-            f"| {_interval(c['cost_of_transport'], c['cost_of_transport_ci'], 3)} "
-            f"| {failures} |"
-        )
+    lines = _markdown(COLUMNS, [cell_row(c) for c in summary["cells"]])
     seeds = summary.get("across_seeds")
     if seeds:
-        lines += [
-            "",
-            f"| group | tasks | runs | IQM of the success rate ({level} % interval) |",
-            "|---|---:|---:|---|",
+        groups = [
+            (g["group"], g["tasks"], g["runs"], interval_text(g["iqm"], g["iqm_ci"], ".0f", 100))
+            for g in seeds["groups"]
         ]
-        for g in seeds["groups"]:
-            lines.append(
-                f"| {g['group']} | {g['tasks']} | {g['runs']} "
-                f"| {_interval(g['iqm'], g['iqm_ci'], 2)} |"
-            )
+        header = ("group", "tasks", "runs", f"IQM of the success rate [%] ({level} % interval)")
+        lines += ["", *_markdown(header, groups)]
         if seeds["improvement"]:
-            lines += [
-                "",
-                f"| x | y | P(x better than y) ({level} % interval) |",
-                "|---|---|---|",
+            pairs = [
+                (p["x"], p["y"], interval_text(p["p_x_better"], p["p_x_better_ci"], ".2f"))
+                for p in seeds["improvement"]
             ]
-            for p in seeds["improvement"]:
-                lines.append(
-                    f"| {p['x']} | {p['y']} | {_interval(p['p_x_better'], p['p_x_better_ci'], 2)} |"
-                )
+            lines += ["", *_markdown(("x", "y", f"P(x better than y) ({level} % interval)"), pairs)]
     return "\n".join(lines) + "\n"
 
 

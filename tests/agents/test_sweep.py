@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from agents.sweep import make_tasks, read_records, run_sweep, spec_from_dict, summarize_sweep
-from agents.sweep.aggregate import summary_markdown
+from agents.sweep.aggregate import COLUMNS, summary_markdown
 from agents.sweep.plots import plot_sweep, success_curves
 from agents.sweep.store import EPISODES_FILE
 
@@ -66,9 +66,9 @@ def test_records_and_summary(small_sweep):
     assert len(csv_lines) == 5 and "success_rate_low" in csv_lines[0]
     # the Markdown table: a header, its rule and one row per cell, in grid order
     md = (out / "summary.md").read_text().splitlines()
-    assert len(md) == 6 and md[0].startswith("| env | policy | success (95 % interval)")
-    row = next(line for line in md if line.startswith("| rough (difficulty=1) | passive |"))
-    assert "| 0/3 (0-56 %) |" in row and row.endswith("| trip 3 |")
+    assert len(md) == 6 and md[0] == "| " + " | ".join(COLUMNS) + " |"
+    row = next(line for line in md if line.startswith("| passive | rough (difficulty=1) |"))
+    assert "| 0 [0, 56] (0/3) |" in row and row.endswith("| trip 3 |")
     assert [p.name for p in result.plots] == ["success_rough_difficulty.png"]
 
 
@@ -172,8 +172,8 @@ def test_across_training_seeds():
     assert (pair["x"], pair["y"], pair["p_x_better"]) == ("good", "bad", 1.0)
     # the Markdown summary: 12 cells, then the groups' IQM and the pair's improvement
     md = summary_markdown(summary).splitlines()
-    assert md[2].startswith("| a | good s0 | 18/20 (70-97 %) | ")
-    assert "| good | 2 | 3 | 0.90 [0.90, 0.90] |" in md
+    assert md[2].startswith("| good s0 | a | 90 [70, 97] (18/20) | ")
+    assert "| good | 2 | 3 | 90 [90, 90] |" in md
     assert "| good | bad | 1.00 [1.00, 1.00] |" in md
     # no groups: no across-seeds part
     plain = spec_from_dict({"episodes": 20, "policies": ["pd"], "envs": envs})
