@@ -148,10 +148,11 @@ class ControllerConfig:
             empty list gives the plain chain (shorter horizon, PD on a single step).
         replan_evaluations: step evaluations (see :attr:`PlannerConfig.max_evaluations`) the
             planner calls of one replanning may spend together, the full problem and the
-            relaxations; each call gets what is left (at most the planner's own
-            ``max_evaluations``), the least-violating steps get the planner's own budget. A
-            deterministic bound on the replanning time (about 55 us per evaluation on one
-            core), >= 1. The plan at :meth:`TransverseController.reset` (nothing to fall back
+            relaxations (the beam search over the horizon, which has its own budget per call,
+            :attr:`PlannerConfig.beam_evaluations`, not counted); each call gets what is left
+            (at most the planner's own ``max_evaluations``), the least-violating steps get the
+            planner's own budget. A deterministic bound on the replanning time (about 55 us per
+            evaluation on one core), >= 1. The plan at :meth:`TransverseController.reset` (nothing to fall back
             on) runs its whole search.
         tube_energy: replan within a step (replan mode) when the estimated state leaves the
             plan's tube: ``|theta_dot^2 - theta_dot*^2(theta)|`` above this fraction of
@@ -556,9 +557,9 @@ class TransverseController:
                         previous_plan=previous,
                         max_evaluations=None if previous is None else min(left, cap),
                     )
-                    left -= plan.evaluations
+                    left -= plan.evaluations - plan.beam_evaluations
             except PlanningError as exc:
-                left -= exc.evaluations
+                left -= exc.evaluations - exc.beam_evaluations
                 rec.plan_evaluations += exc.evaluations
                 rec.budget_exhausted |= exc.budget_exhausted
                 notes.append(f"{name}: {exc}")

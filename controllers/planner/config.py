@@ -30,8 +30,10 @@ class PlanningError(RuntimeError):
 
     A failed search also says what it found (set by :meth:`GaitPlanner.plan`): ``partial``, the
     feasible steps ``0 .. step - 1`` before the failure (a list of :class:`StepPlan`, the best
-    plan found), ``evaluations`` (step evaluations spent) and ``budget_exhausted`` (the search
-    was cut by its budget, ``PlannerConfig.max_evaluations`` / ``time_budget``).
+    plan found), ``evaluations`` (step evaluations spent, the beam search's included),
+    ``beam_evaluations`` (those of the beam search over the horizon, which has its own budget,
+    ``PlannerConfig.beam_evaluations``) and ``budget_exhausted`` (the search was cut by its
+    budget, ``PlannerConfig.max_evaluations`` / ``time_budget``).
     """
 
     def __init__(self, step: int, constraint: str, detail: str = ""):
@@ -40,6 +42,7 @@ class PlanningError(RuntimeError):
         self.detail = str(detail)
         self.partial: list = []
         self.evaluations = 0
+        self.beam_evaluations = 0
         self.budget_exhausted = False
         msg = f"planning failed at step {self.step}: {self.constraint}"
         super().__init__(msg + (f" ({detail})" if detail else ""))

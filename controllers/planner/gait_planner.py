@@ -150,6 +150,7 @@ class GaitPlanner:
         )
         plan = Plan(search.run(start, stance), self.params, self.config)
         plan.evaluations = search.evaluations.used
+        plan.beam_evaluations = search.beam_evaluations
         plan.beam = search.beam
         plan.solve_time = time.perf_counter() - t0
         return plan

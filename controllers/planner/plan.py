@@ -198,7 +198,9 @@ class Plan:
         config: the :class:`PlannerConfig` used.
         solve_time: wall time of the planning call [s].
         evaluations: step evaluations the planning call spent (see
-            :attr:`PlannerConfig.max_evaluations`).
+            :attr:`PlannerConfig.max_evaluations`), the beam search's included.
+        beam_evaluations: those of the beam search over the horizon (its own budget,
+            :attr:`PlannerConfig.beam_evaluations`).
         violations: per step, ``(worst, constraint)``: the most negative constraint value and
             the violated constraint's name (``(0.0, "")`` for a feasible step); a plan of the
             least-violating steps (:meth:`GaitPlanner.plan_least_violation`) may have some.
@@ -213,6 +215,7 @@ class Plan:
         self.config = config
         self.solve_time = math.nan
         self.evaluations = 0
+        self.beam_evaluations = 0
         self.violations: list[tuple[float, str]] = [(0.0, "")] * len(self.steps)
         self.beam = False
 

@@ -139,6 +139,7 @@ class StepSearch:
         # previous plan is there to fall back on), stalled SLSQP runs end early
         self.struggling = False
         self.beam = False  # the plan came from the beam search over the horizon
+        self.beam_evaluations = 0  # step evaluations the beam search spent (its own budget)
 
     def run(
         self, start: tuple[float, float, float, float], stance: tuple[float, float]
@@ -168,7 +169,8 @@ class StepSearch:
             # the footholds and speeds over the horizon searched jointly
             steps, used, cut = beam_steps(self, start, stance)
             self.evaluations.used += used
-            exc.evaluations = self.evaluations.used
+            self.beam_evaluations = used
+            exc.evaluations, exc.beam_evaluations = self.evaluations.used, used
             exc.budget_exhausted |= cut
             if len(steps) == H:
                 self.beam = True
@@ -178,6 +180,7 @@ class StepSearch:
             # the beam got further: its deepest branch is the best plan found
             deeper = PlanningError(len(steps), "no feasible step in the beam search", str(exc))
             deeper.partial, deeper.evaluations = steps, exc.evaluations
+            deeper.beam_evaluations = used
             deeper.budget_exhausted = exc.budget_exhausted
             raise deeper from exc
 

@@ -143,3 +143,21 @@ def test_the_beam_search_keeps_walking_where_the_depth_first_search_runs_into_a_
         "shorter horizon",
         "least violation",
     ]
+
+
+def test_the_beam_search_does_not_spend_the_relaxations_budget(gait):
+    """The beam search over the horizon has its own budget: where the full problem's
+    depth-first search and beam fail, the relaxation gets the replanning budget the depth-first
+    search left. Before, the beam's evaluations were charged to that budget too, and on this
+    rise the relaxed search of the third footstep ran out of it ("search budget exhausted")
+    and left a shorter look-ahead."""
+    relax = ControllerConfig(fallbacks=[{"torque_fraction": 0.8}])
+    out, _ = walk(RISE, gait, relax, {**TIGHT, "beam_width": 32})
+    recs = out["records"]
+    assert max(r.plan_evaluations for r in recs) > relax.replan_evaluations  # the beam ran
+    relaxed = [r for r in recs if (r.fallback or "").startswith("relaxed")]
+    assert [r.fallback for r in relaxed] == ["relaxed: torque_fraction=0.8"] * 2
+    for r in relaxed:
+        assert r.reason.startswith("full problem: planning failed")
+        assert "relaxed: torque_fraction=0.8: planning failed" not in r.reason, r.reason
+    assert out["failure"] is None and len(out["impacts"]) >= 5

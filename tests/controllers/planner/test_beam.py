@@ -28,6 +28,10 @@ def test_the_beam_plans_the_horizon_where_the_depth_first_search_stops_short(ris
     plan = plan_blocks(course, beam_width=32)
     assert plan.beam and len(plan) == HORIZON
     assert BUDGET < plan.evaluations <= BUDGET + PlannerConfig().beam_evaluations + 100
+    # the beam's evaluations are counted apart (its own budget): the rest is the depth-first
+    # search's, within the call's budget
+    assert 0 < plan.beam_evaluations <= PlannerConfig().beam_evaluations + 65
+    assert plan.evaluations - plan.beam_evaluations <= BUDGET + 100
     # a chain of steps from the actual state, each feasible under every constraint
     pl = GaitPlanner("paper", {"beam_width": 32})
     ev = StepEvaluator(pl.params, pl.config, TerrainMap(course.terrain()))
@@ -73,6 +77,8 @@ def test_the_beam_is_deterministic_and_bounded_by_its_budget(rise_after_drops):
     exc = info.value
     assert not exc.partial or len(exc.partial) < HORIZON
     assert exc.evaluations <= BUDGET + 100 + 300 + 100
+    assert 0 < exc.beam_evaluations <= 300 + 65
+    assert exc.evaluations - exc.beam_evaluations <= BUDGET + 100
 
 
 def test_terrain_no_sequence_crosses_still_raises_naming_the_step(planners):
