@@ -17,6 +17,17 @@ trials, inverted. Walks that were all censored give no estimate, only a lower bo
 :func:`kaplan_meier` gives the survival curve without the geometric assumption and
 :func:`geometric_check` tests the assumption (constant hazard against a hazard constant on
 blocks of footsteps).
+
+:func:`markov_mfpt` drops the memoryless assumption for a Markov one (Byl and Tedrake 2009):
+the walker's post-impact state, binned on a mesh, is a Markov chain with an absorbing failure
+state, and the MFPT is ``1 / (1 - lambda_2)``, ``lambda_2`` the largest eigenvalue of the
+transitions between the mesh's cells (the chain's second largest, after the failure state's
+1): the expected footsteps to failure from the chain's quasi-stationary distribution. The
+transitions are counted on the walks' own footsteps: with random terrain integrated out by the
+walks' courses, and each walk's first post-impact state drawn from the start, not from the
+mesh (the reference controller's plans look four footsteps ahead over the terrain it has
+seen, so one footstep from a mesh point on a terrain bin, Byl and Tedrake's construction, is
+not defined for it).
 """
 
 from __future__ import annotations
@@ -40,10 +51,12 @@ from .policies import BASELINES, make_baseline_policy
 __all__ = [
     "MFPTEstimate",
     "MFPTResult",
+    "MarkovEstimate",
     "Walk",
     "estimate_mfpt",
     "geometric_check",
     "kaplan_meier",
+    "markov_mfpt",
     "mfpt_sweep",
     "roughness_terrain",
     "run_walks",
@@ -53,6 +66,9 @@ __all__ = [
 DEFAULT_ENV = "roughwalk/CompassGaitRough-v0"
 #: how a walk ended when it did not fail
 CENSORED = ("cap", "course_end", "time")
+#: the post-impact state's mesh of :func:`markov_mfpt`: quantile bins of ``theta_dot`` (the
+#: stance leg's rate) and of the inter-leg angle
+MARKOV_BINS = (6, 3)
 
 
 def _check_counts(footsteps: Any, failed: Any) -> tuple[np.ndarray, np.ndarray]:
@@ -150,6 +166,159 @@ def estimate_mfpt(
         mfpt=1.0 / p if n_fail else None,
         mfpt_interval=(1.0 / p_hi, 1.0 / p_lo if p_lo > 0 else math.inf),
         confidence=conf,
+    )
+
+
+@dataclass(frozen=True)
+class MarkovEstimate:
+    """MFPT of a Markov chain on binned post-impact states (:func:`markov_mfpt`).
+
+    Attributes:
+        mfpt: ``1 / (1 - lambda_2)`` [footsteps] (None when no walk failed: ``lambda_2 = 1``).
+        mfpt_interval: bootstrap percentile interval over walks at ``confidence`` (the upper
+            end ``inf`` where resampled walks had no failure).
+        lambda_2: largest eigenvalue of the transitions between mesh cells.
+        cells: mesh cells with outgoing footsteps (the chain's transient states).
+        transitions: footsteps counted (cell to cell or to failure).
+        p_fail: per cell with outgoing footsteps, the fraction that failed (the mesh order).
+        visits: per cell, footsteps counted out of it.
+        edges: per state coordinate, the bin edges (quantiles of the pooled states).
+        confidence: the interval's level; bootstrap: resamples.
+    """
+
+    mfpt: float | None
+    mfpt_interval: tuple[float, float]
+    lambda_2: float
+    cells: int
+    transitions: int
+    p_fail: list[float]
+    visits: list[int]
+    edges: list[list[float]]
+    confidence: float
+    bootstrap: int
+
+    def to_dict(self) -> dict[str, Any]:
+        """Plain-JSON form (an infinite upper limit as None)."""
+        d = asdict(self)
+        lo, hi = self.mfpt_interval
+        d["mfpt_interval"] = [lo, hi if math.isfinite(hi) else None]
+        return d
+
+
+def _chain_counts(
+    cells: list[np.ndarray], failed: np.ndarray, n: int
+) -> tuple[np.ndarray, np.ndarray]:
+    """Footsteps from cell to cell ``(n, n)`` and from cell to failure ``(n,)``: each walk's
+    consecutive post-impact cells, and its last cell to failure if it failed."""
+    N = np.zeros((n, n))
+    F = np.zeros(n)
+    for c, f in zip(cells, failed):
+        np.add.at(N, (c[:-1], c[1:]), 1.0)
+        if f:
+            F[c[-1]] += 1.0
+    return N, F
+
+
+def _chain(N: np.ndarray, F: np.ndarray) -> tuple[float, np.ndarray, np.ndarray]:
+    """``(lambda_2, cells, out)``: the largest eigenvalue of the maximum-likelihood transitions
+    between the chain's cells (rows of ``N`` normalised with the failures ``F``), the cells
+    (mask) and the footsteps counted out of each. A footstep into a cell never left (only
+    censored walks ended there) is treated as censored: its row counts without it (and a cell
+    left only that way drops out too). ``lambda_2`` is 1 when no counted footstep failed."""
+    keep = np.ones(N.shape[0], dtype=bool)
+    while True:
+        out = N[:, keep].sum(axis=1) + F
+        again = keep & (out > 0)
+        if np.array_equal(again, keep):
+            break
+        keep = again
+    if not keep.any():
+        return math.nan, keep, out
+    if F[keep].sum() == 0:
+        return 1.0, keep, out
+    T = N[np.ix_(keep, keep)] / out[keep, None]
+    return float(np.max(np.abs(np.linalg.eigvals(T)))), keep, out
+
+
+def markov_mfpt(
+    states: Sequence[np.ndarray],
+    failed: Sequence[bool] | np.ndarray,
+    bins: Sequence[int] = MARKOV_BINS,
+    confidence: float = 0.95,
+    bootstrap: int = 2000,
+    seed: int = 0,
+) -> MarkovEstimate:
+    """MFPT [footsteps] of the Markov chain of binned post-impact states.
+
+    Each state coordinate is cut into ``bins`` quantile bins of the pooled states (the mesh),
+    the footsteps of the walks are counted as transitions between mesh cells (a failed walk's
+    last one into the absorbing failure state), and the MFPT is ``1 / (1 - lambda_2)`` with
+    ``lambda_2`` the largest eigenvalue of the estimated transitions between cells. Cells
+    never left (only censored walks ended there) are not part of the chain.
+
+    Args:
+        states: per walk, its post-impact states ``(k + 1, d)``: the state it started from and
+            the state after each of its ``k`` completed footsteps.
+        failed: per walk, True if its next footstep failed, False if it was censored.
+        bins: bins per state coordinate (``d`` integers >= 1).
+        confidence: level of the bootstrap interval (walks resampled), in (0, 1).
+        bootstrap: resamples, >= 100.
+        seed: seed of the resampling.
+    """
+    conf = _check_confidence(confidence)
+    fails = np.asarray(failed)
+    if fails.ndim != 1 or fails.dtype != bool or fails.size != len(states) or not len(states):
+        raise ValueError("failed: one boolean per walk, and at least one walk")
+    X = [np.asarray(x, dtype=np.float64) for x in states]
+    if any(x.ndim != 2 or x.shape[0] < 1 or x.shape[1] != len(bins) for x in X):
+        raise ValueError(f"states: per walk an array (footsteps + 1, {len(bins)})")
+    if not all(isinstance(b, (int, np.integer)) and b >= 1 for b in bins):
+        raise ValueError(f"bins = {bins!r}; allowed: integers >= 1")
+    if isinstance(bootstrap, bool) or not isinstance(bootstrap, int) or bootstrap < 100:
+        raise ValueError(f"bootstrap = {bootstrap!r}; allowed: an integer >= 100")
+    pooled = np.concatenate(X)
+    if not np.all(np.isfinite(pooled)):
+        raise ValueError("states must be finite")
+    edges = [
+        np.unique(np.quantile(pooled[:, j], np.linspace(0, 1, b + 1))[1:-1])
+        for j, b in enumerate(bins)
+    ]
+    shape = tuple(len(e) + 1 for e in edges)
+    cells = [
+        np.ravel_multi_index(
+            tuple(np.searchsorted(e, x[:, j], side="right") for j, e in enumerate(edges)), shape
+        )
+        for x in X
+    ]
+    n = int(np.prod(shape))
+    N, F = _chain_counts(cells, fails, n)
+    lam, keep, out = _chain(N, F)
+    if not math.isfinite(lam):
+        raise ValueError("no walk completed a footstep or failed: nothing to estimate")
+    rng = np.random.default_rng(seed)
+    boot = np.empty(bootstrap)
+    for b in range(bootstrap):
+        pick = rng.integers(0, len(cells), len(cells))
+        Nb, Fb = _chain_counts([cells[i] for i in pick], fails[pick], n)
+        boot[b] = _chain(Nb, Fb)[0]
+    boot = boot[np.isfinite(boot)]
+    with np.errstate(divide="ignore"):
+        mfpts = np.where(boot < 1.0, 1.0 / (1.0 - np.minimum(boot, 1.0)), math.inf)
+    a = (1.0 - conf) / 2.0
+    ordered = np.sort(mfpts)  # percentiles by rank (no interpolation between infinities)
+    lo = ordered[int(math.floor(a * (ordered.size - 1)))]
+    hi = ordered[int(math.ceil((1.0 - a) * (ordered.size - 1)))]
+    return MarkovEstimate(
+        mfpt=1.0 / (1.0 - lam) if lam < 1.0 else None,
+        mfpt_interval=(float(lo), float(hi)),
+        lambda_2=lam,
+        cells=int(keep.sum()),
+        transitions=int(out.sum()),
+        p_fail=[float(f) for f in F[keep] / out[keep]],
+        visits=[int(v) for v in out[keep]],
+        edges=[e.tolist() for e in edges],
+        confidence=conf,
+        bootstrap=bootstrap,
     )
 
 
@@ -253,6 +422,9 @@ class Walk:
         footsteps: footsteps completed; distance: hip progress [m]; time: simulated [s].
         failed: True if it ended in a failure; end: the failure reason (``fall``, ``trip``,
             ...) or why it was censored (``cap``, ``course_end``, ``time``).
+        states: ``(theta, theta_dot)`` of the stance leg [rad, rad/s] at the start and at the
+            first control tick after each completed footstep's touchdown (the post-impact
+            states of :func:`markov_mfpt`; ``footsteps + 1`` pairs).
     """
 
     walk: int
@@ -262,6 +434,7 @@ class Walk:
     time: float
     failed: bool
     end: str
+    states: tuple[tuple[float, float], ...] = ()
 
 
 class _SubEnv:
@@ -393,9 +566,12 @@ def run_walks(
         base = venv.unwrapped
         pols = [make_baseline_policy(policy, _SubEnv(base, i)) for i in range(n)]
         slot_walk = list(range(n))
-        obs, _ = venv.reset(seed=[seed + j for j in range(n)])
+        obs, info = venv.reset(seed=[seed + j for j in range(n)])
         for p in pols:
             p.reset()
+        # per slot: the walk's post-impact (theta, theta_dot) so far, and its footsteps
+        states: list[list[tuple[float, float]]] = [[_stance_state(info, i)] for i in range(n)]
+        seen = [0] * n
         done: dict[int, Walk] = {}
         next_walk = n
         actions = np.zeros((n, 1), dtype=np.float32)
@@ -410,6 +586,9 @@ def run_walks(
                 if j < 0:
                     continue
                 steps = int(info["footsteps"][i])
+                if steps > seen[i] and steps <= step_cap:
+                    states[i].append(_stance_state(info, i))
+                seen[i] = steps
                 if term[i]:
                     end = str(info["failure"][i])
                 elif steps >= step_cap:
@@ -428,6 +607,7 @@ def run_walks(
                     time=float(info["time"][i]),
                     failed=bool(term[i]),
                     end=end,
+                    states=tuple(states[i][: min(steps, step_cap) + 1]),
                 )
                 done[j] = w
                 if on_walk is not None:
@@ -439,12 +619,19 @@ def run_walks(
                 else:
                     slot_walk[i] = -1
             if ended.any():
-                obs, _ = venv.reset(seed=seeds, options={"reset_mask": ended})
+                obs, info = venv.reset(seed=seeds, options={"reset_mask": ended})
                 for i in np.nonzero(ended)[0]:
                     pols[i].reset()
+                    states[i], seen[i] = [_stance_state(info, i)], 0
     finally:
         venv.close()
     return [done[j] for j in range(walks)]
+
+
+def _stance_state(info: dict[str, Any], i: int) -> tuple[float, float]:
+    """Sub-env ``i``'s stance-leg ``(theta, theta_dot)`` [rad, rad/s], rounded to 1e-6."""
+    x = info["state"][i]
+    return (round(float(x[1]), 6), round(float(x[3]), 6))
 
 
 # ---------------------------------------------------------------------------- sweep
@@ -458,6 +645,8 @@ class MFPTResult:
             [m].
         estimate: the censored geometric estimate; geometric: :func:`geometric_check`.
         walks: the walks; wall_time: wall-clock time of the walks [s].
+        markov: the Markov-chain estimate on the walks' post-impact states
+            (:func:`markov_mfpt`).
     """
 
     policy: str
@@ -468,6 +657,7 @@ class MFPTResult:
     geometric: dict[str, Any]
     walks: list[Walk]
     wall_time: float
+    markov: MarkovEstimate | None = None
 
     def to_dict(self) -> dict[str, Any]:
         """Plain-JSON form, the walks and the Kaplan-Meier curve included."""
@@ -481,6 +671,7 @@ class MFPTResult:
             "leg_length": self.leg_length,
             "estimate": self.estimate.to_dict(),
             "geometric_check": self.geometric,
+            "markov_chain": None if self.markov is None else self.markov.to_dict(),
             "kaplan_meier": {key: v.tolist() for key, v in km.items()},
             "ends": dict(sorted(Counter(w.end for w in self.walks).items())),
             "wall_time": self.wall_time,
@@ -533,6 +724,7 @@ def mfpt_sweep(
             geometric=geometric_check(k, d),
             walks=ws,
             wall_time=wall,
+            markov=markov_mfpt([np.array(w.states) for w in ws], d, confidence=confidence),
         )
         out.append(res)
         if on_result is not None:

@@ -12,6 +12,10 @@ with the exact (Clopper-Pearson) interval of p inverted. Levels where no walk fa
 a lower bound (shown as >=). The geometric column is the p-value of a likelihood-ratio test of
 that assumption against a failure probability that changes with the footstep number (small:
 the assumption does not fit; the JSON has the Kaplan-Meier survival curve of every level).
+The chain column is the Markov-chain estimate (Byl and Tedrake 2009): the walks' post-impact
+stance-leg states binned on a mesh (6 bins of theta_dot x 3 of theta), their footsteps counted
+as transitions between the cells and into failure, MFPT = 1 / (1 - lambda_2), with a bootstrap
+interval over walks.
 
 Writes OUT/mfpt.json (every walk, the Kaplan-Meier curves, the checks), OUT/mfpt.csv (one row
 per policy and level), OUT/mfpt.png (MFPT against roughness on a log axis) and
@@ -66,6 +70,9 @@ CSV_COLUMNS = (
     "mfpt_high",
     *(f"censored_{e}" for e in CENSORED),
     "geometric_p_value",
+    "markov_mfpt",
+    "markov_mfpt_low",
+    "markov_mfpt_high",
     "wall_time_s",
 )
 
@@ -136,8 +143,26 @@ def _row(res: MFPTResult) -> dict[str, Any]:
         "mfpt_high": est.mfpt_interval[1] if math.isfinite(est.mfpt_interval[1]) else None,
         **{f"censored_{e}": ends.count(e) for e in CENSORED},
         "geometric_p_value": res.geometric["p_value"],
+        **_markov_columns(res),
         "wall_time_s": res.wall_time,
     }
+
+
+def _markov_columns(res: MFPTResult) -> dict[str, Any]:
+    m = res.markov
+    if m is None:
+        return {"markov_mfpt": None, "markov_mfpt_low": None, "markov_mfpt_high": None}
+    lo, hi = m.mfpt_interval
+    return {
+        "markov_mfpt": m.mfpt,
+        "markov_mfpt_low": lo,
+        "markov_mfpt_high": hi if math.isfinite(hi) else None,
+    }
+
+
+def _interval_text(value: float | None, lo: float, hi: float) -> str:
+    hi_text = f"{hi:.1f}" if math.isfinite(hi) else "inf"
+    return f"{value:.1f} [{lo:.1f}, {hi_text}]"
 
 
 def format_row(res: MFPTResult) -> str:
@@ -148,13 +173,15 @@ def format_row(res: MFPTResult) -> str:
     if est.mfpt is None:
         mfpt = f">= {lo:.1f} (no failure; {pct} % lower bound)"
     else:
-        hi_text = f"{hi:.1f}" if math.isfinite(hi) else "inf"
-        mfpt = f"{est.mfpt:.1f} [{lo:.1f}, {hi_text}]"
+        mfpt = _interval_text(est.mfpt, lo, hi)
     gp = res.geometric["p_value"]
+    m = res.markov
+    chain = "-" if m is None or m.mfpt is None else _interval_text(m.mfpt, *m.mfpt_interval)
     return (
         f"{res.policy:9s} R = {res.roughness * 1000:6.2f} mm ({res.roughness_per_leg:6.2%} of l): "
         f"MFPT {mfpt} footsteps; {est.failures}/{est.walks} walks failed in {est.exposure} "
-        f"footsteps; geometric p = {'-' if gp is None else f'{gp:.2f}'}; {res.wall_time:.0f} s"
+        f"footsteps; geometric p = {'-' if gp is None else f'{gp:.2f}'}; chain {chain}; "
+        f"{res.wall_time:.0f} s"
     )
 
 

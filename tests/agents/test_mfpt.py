@@ -12,6 +12,7 @@ from agents.mfpt import (
     estimate_mfpt,
     geometric_check,
     kaplan_meier,
+    markov_mfpt,
     roughness_terrain,
     run_walks,
 )
@@ -124,6 +125,11 @@ def test_pd_walks_are_censored_at_the_cap_and_reproducible():
     a = run_walks("pd", 0.0, 2, walkers=2, step_cap=3, seed=0)
     assert all(not w.failed and w.end == "cap" and w.footsteps == 3 for w in a)
     assert all(w.distance > 0.2 for w in a)
+    # the post-impact (theta, theta_dot) of the start and of each footstep: on flat ground
+    # the stance leg starts behind the vertical and moving forwards
+    for w in a:
+        assert len(w.states) == w.footsteps + 1
+        assert all(th < 0 < thd for th, thd in w.states[1:])
     b = run_walks("pd", 0.0, 2, walkers=1, step_cap=3, seed=0)
     assert a == b
 
@@ -143,3 +149,66 @@ def test_run_walks_rejects_bad_arguments(kwargs, match):
     args = {"policy": "passive", "roughness": 0.0, "walks": 1, **kwargs}
     with pytest.raises(ValueError, match=match):
         run_walks(args.pop("policy"), args.pop("roughness"), args.pop("walks"), **args)
+
+
+def chain_walks(rng, T, fail, values, walks, cap):
+    """Walks of a Markov chain over cells with values ``values`` (theta_dot; theta 0),
+    transitions ``T`` and failure probabilities ``fail`` per cell, censored at ``cap``."""
+    states, failed = [], []
+    for _ in range(walks):
+        c = int(rng.integers(len(values)))
+        xs, f = [(0.0, values[c])], False
+        for _ in range(cap):
+            r = rng.random()
+            if r < fail[c]:
+                f = True
+                break
+            c = int(rng.choice(len(values), p=T[c] / T[c].sum()))
+            xs.append((0.0, values[c]))
+        states.append(np.array(xs))
+        failed.append(f)
+    return states, np.array(failed)
+
+
+def test_markov_mfpt_recovers_a_known_chain():
+    """Two post-impact cells, one slow and risky, one fast and safe: the chain's MFPT
+    ``1 / (1 - lambda_2)`` and each cell's failure probability are recovered from censored
+    walks."""
+    rng = np.random.default_rng(1)
+    fail = np.array([0.2, 0.02])
+    T = np.array([[0.3, 0.5], [0.2, 0.78]])  # rows + fail = 1
+    lam = max(abs(np.linalg.eigvals(T)))
+    states, failed = chain_walks(rng, T, fail, [0.5, 1.5], 1500, 60)
+    est = markov_mfpt(states, failed, bins=(1, 2), bootstrap=200)
+    assert est.cells == 2 and est.lambda_2 == pytest.approx(lam, abs=0.01)
+    assert est.mfpt == pytest.approx(1 / (1 - lam), rel=0.1)
+    assert est.mfpt_interval[0] < est.mfpt < est.mfpt_interval[1]
+    assert est.p_fail == pytest.approx(list(fail), abs=0.02)
+
+
+def test_markov_mfpt_of_one_cell_is_the_geometric_estimate():
+    rng = np.random.default_rng(2)
+    k, d = geometric_walks(rng, 0.05, 300, 30)
+    states = [np.column_stack([np.zeros(n + 1), np.ones(n + 1)]) for n in k]
+    est = markov_mfpt(states, d, bins=(1, 1), bootstrap=100)
+    assert est.cells == 1
+    assert est.mfpt == pytest.approx(estimate_mfpt(k, d).mfpt, rel=1e-12)
+    # no failure: only censored walks, no finite MFPT
+    none = markov_mfpt(states, np.zeros(len(states), dtype=bool), bins=(1, 1), bootstrap=100)
+    assert none.mfpt is None and none.lambda_2 == 1.0 and none.mfpt_interval[1] == math.inf
+
+
+@pytest.mark.parametrize(
+    "kwargs, match",
+    [
+        ({"failed": [True]}, "one boolean per walk"),
+        ({"bins": (0, 2)}, "bins"),
+        ({"bootstrap": 10}, "bootstrap"),
+        ({"states": [np.ones((3, 3)), np.ones((2, 3))]}, "states"),
+        ({"states": [np.full((2, 2), np.nan), np.ones((2, 2))]}, "finite"),
+    ],
+)
+def test_markov_mfpt_rejects_bad_input(kwargs, match):
+    args = {"states": [np.ones((3, 2)), np.ones((2, 2))], "failed": [True, False]}
+    with pytest.raises(ValueError, match=match):
+        markov_mfpt(**{**args, **kwargs})

@@ -36,8 +36,13 @@ def test_mfpt_writes_results_and_stops_below_the_threshold(tmp_path: Path, capsy
     assert level["estimate"]["failures"] == 3 and level["estimate"]["mfpt"] < 10
     assert [w["seed"] for w in level["walks"]] == [0, 1, 2]
     assert level["kaplan_meier"]["survival"][-1] == 0.0
+    # the Markov-chain estimate on the same walks (every walk failed)
+    chain = level["markov_chain"]
+    assert chain["mfpt"] < 10 and chain["transitions"] == level["estimate"]["exposure"]
+    assert "chain" in printed
     rows = list(csv.DictReader((out / "mfpt.csv").open()))
     assert len(rows) == 1 and rows[0]["policy"] == "passive" and rows[0]["walks"] == "3"
+    assert float(rows[0]["markov_mfpt"]) == pytest.approx(chain["mfpt"])
     assert (out / "mfpt.png").stat().st_size > 0
     assert (out / "mfpt_survival.png").stat().st_size > 0
     names = ["mfpt.csv", "mfpt.json", "mfpt.png", "mfpt_survival.png"]
