@@ -66,8 +66,8 @@ __all__ = [
 DEFAULT_ENV = "roughwalk/CompassGaitRough-v0"
 #: how a walk ended when it did not fail
 CENSORED = ("cap", "course_end", "time")
-#: the post-impact state's mesh of :func:`markov_mfpt`: quantile bins of ``theta_dot`` (the
-#: stance leg's rate) and of the inter-leg angle
+#: the post-impact state's mesh of :func:`markov_mfpt`: quantile bins of the stance leg's angle
+#: ``theta`` and of its rate ``theta_dot`` (the coordinates of :attr:`Walk.states`)
 MARKOV_BINS = (6, 3)
 
 

@@ -13,9 +13,9 @@ a lower bound (shown as >=). The geometric column is the p-value of a likelihood
 that assumption against a failure probability that changes with the footstep number (small:
 the assumption does not fit; the JSON has the Kaplan-Meier survival curve of every level).
 The chain column is the Markov-chain estimate (Byl and Tedrake 2009): the walks' post-impact
-stance-leg states binned on a mesh (6 bins of theta_dot x 3 of theta), their footsteps counted
-as transitions between the cells and into failure, MFPT = 1 / (1 - lambda_2), with a bootstrap
-interval over walks.
+stance-leg states binned on a mesh (6 quantile bins of theta x 3 of theta_dot), their
+footsteps counted as transitions between the cells and into failure, MFPT = 1 / (1 -
+lambda_2), with a bootstrap interval over walks.
 
 Writes OUT/mfpt.json (every walk, the Kaplan-Meier curves, the checks), OUT/mfpt.csv (one row
 per policy and level), OUT/mfpt.png (MFPT against roughness on a log axis) and

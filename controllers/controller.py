@@ -152,8 +152,8 @@ class ControllerConfig:
             :attr:`PlannerConfig.beam_evaluations`, not counted); each call gets what is left
             (at most the planner's own ``max_evaluations``), the least-violating steps get the
             planner's own budget. A deterministic bound on the replanning time (about 55 us per
-            evaluation on one core), >= 1. The plan at :meth:`TransverseController.reset` (nothing to fall back
-            on) runs its whole search.
+            evaluation on one core), >= 1. The plan at :meth:`TransverseController.reset`
+            (nothing to fall back on) runs its whole search.
         tube_energy: replan within a step (replan mode) when the estimated state leaves the
             plan's tube: ``|theta_dot^2 - theta_dot*^2(theta)|`` above this fraction of
             ``theta_dot*^2(theta)`` (a push, a stall in the making, a plan made from a poor
