@@ -69,6 +69,7 @@ CENSORED = ("cap", "course_end", "time")
 #: the post-impact state's mesh of :func:`markov_mfpt`: quantile bins of the stance leg's angle
 #: ``theta`` and of its rate ``theta_dot`` (the coordinates of :attr:`Walk.states`)
 MARKOV_BINS = (6, 3)
+NOTHING_TO_COUNT = "nothing to estimate"
 
 
 def _check_counts(footsteps: Any, failed: Any) -> tuple[np.ndarray, np.ndarray]:
@@ -294,7 +295,7 @@ def markov_mfpt(
     N, F = _chain_counts(cells, fails, n)
     lam, keep, out = _chain(N, F)
     if not math.isfinite(lam):
-        raise ValueError("no walk completed a footstep or failed: nothing to estimate")
+        raise ValueError(f"no footstep leaves a cell and no walk failed: {NOTHING_TO_COUNT}")
     rng = np.random.default_rng(seed)
     boot = np.empty(bootstrap)
     for b in range(bootstrap):
@@ -679,6 +680,19 @@ class MFPTResult:
         }
 
 
+def _markov_or_none(
+    walks: list[Walk], failed: np.ndarray, confidence: float
+) -> MarkovEstimate | None:
+    """:func:`markov_mfpt` of the walks, None when they give it nothing to count (no footstep
+    that ends in a cell ever left, no failure): the walks are kept either way."""
+    try:
+        return markov_mfpt([np.array(w.states) for w in walks], failed, confidence=confidence)
+    except ValueError as exc:
+        if NOTHING_TO_COUNT in str(exc):
+            return None
+        raise
+
+
 def mfpt_sweep(
     policy: str,
     roughnesses: Sequence[float],
@@ -724,7 +738,7 @@ def mfpt_sweep(
             geometric=geometric_check(k, d),
             walks=ws,
             wall_time=wall,
-            markov=markov_mfpt([np.array(w.states) for w in ws], d, confidence=confidence),
+            markov=_markov_or_none(ws, d, confidence),
         )
         out.append(res)
         if on_result is not None:

@@ -212,3 +212,10 @@ def test_markov_mfpt_rejects_bad_input(kwargs, match):
     args = {"states": [np.ones((3, 2)), np.ones((2, 2))], "failed": [True, False]}
     with pytest.raises(ValueError, match=match):
         markov_mfpt(**{**args, **kwargs})
+
+
+def test_markov_mfpt_without_anything_to_count_is_a_clear_error():
+    """Censored walks whose footsteps all end in cells never left: no chain to estimate."""
+    states = [np.array([[0.0, 1.0], [0.1, 2.0]]), np.array([[0.2, 3.0]])]
+    with pytest.raises(ValueError, match="nothing to estimate"):
+        markov_mfpt(states, [False, False], bins=(2, 2), bootstrap=100)
