@@ -44,6 +44,7 @@ from agents.mfpt import (
 )
 from agents.policies import BASELINES
 from agents.runs import atomic_write, atomic_write_stream, refuse_earlier_outputs
+from agents.sweep.aggregate import interval_text
 from commands.cli import (
     CONTROLLER_KERNELS,
     SIMULATOR_KERNELS,
@@ -149,20 +150,11 @@ def _row(res: MFPTResult) -> dict[str, Any]:
 
 
 def _markov_columns(res: MFPTResult) -> dict[str, Any]:
-    m = res.markov
-    if m is None:
+    if res.markov is None:
         return {"markov_mfpt": None, "markov_mfpt_low": None, "markov_mfpt_high": None}
-    lo, hi = m.mfpt_interval
-    return {
-        "markov_mfpt": m.mfpt,
-        "markov_mfpt_low": lo,
-        "markov_mfpt_high": hi if math.isfinite(hi) else None,
-    }
-
-
-def _interval_text(value: float | None, lo: float, hi: float) -> str:
-    hi_text = f"{hi:.1f}" if math.isfinite(hi) else "inf"
-    return f"{value:.1f} [{lo:.1f}, {hi_text}]"
+    m = res.markov.to_dict()  # (an infinite upper limit as None)
+    lo, hi = m["mfpt_interval"]
+    return {"markov_mfpt": m["mfpt"], "markov_mfpt_low": lo, "markov_mfpt_high": hi}
 
 
 def format_row(res: MFPTResult) -> str:
@@ -173,10 +165,10 @@ def format_row(res: MFPTResult) -> str:
     if est.mfpt is None:
         mfpt = f">= {lo:.1f} (no failure; {pct} % lower bound)"
     else:
-        mfpt = _interval_text(est.mfpt, lo, hi)
+        mfpt = interval_text(est.mfpt, (lo, hi), ".1f")
     gp = res.geometric["p_value"]
     m = res.markov
-    chain = "-" if m is None or m.mfpt is None else _interval_text(m.mfpt, *m.mfpt_interval)
+    chain = "-" if m is None else interval_text(m.mfpt, m.mfpt_interval, ".1f")
     return (
         f"{res.policy:9s} R = {res.roughness * 1000:6.2f} mm ({res.roughness_per_leg:6.2%} of l): "
         f"MFPT {mfpt} footsteps; {est.failures}/{est.walks} walks failed in {est.exposure} "
