@@ -16,7 +16,6 @@ import numpy as np
 from gymnasium import spaces
 
 from controllers.estimator import SensorStateEstimator
-from controllers.observer import DEFAULT_EPS
 from envs.physics.actuator import input_from_action
 
 VELOCITY_LIMIT = 50.0  # [rad/s]: estimated velocities are clipped to this in the observation
@@ -46,10 +45,11 @@ class EstimatedStateObservation(gym.Wrapper, gym.utils.RecordConstructorArgs):
 
     Args:
         env: a roughwalk env observing ``"sensors"``.
-        eps: observer time constant [s].
+        eps: observer time constant [s]; None: from the encoders' noise
+            (:func:`controllers.observer.eps_for_noise`).
     """
 
-    def __init__(self, env: gym.Env, eps: float = DEFAULT_EPS) -> None:
+    def __init__(self, env: gym.Env, eps: float | None = None) -> None:
         gym.utils.RecordConstructorArgs.__init__(self, eps=eps)
         gym.Wrapper.__init__(self, env)
         self.estimator = SensorStateEstimator(env, eps)

@@ -40,8 +40,9 @@ from envs.physics.terrain import Terrain
 from .localisation import LocalisationResult, ScanLocaliser
 from .mapping import ScanMap
 from .observer import (
-    DEFAULT_EPS,
     HighGainObserver,
+    angle_sigma,
+    eps_for_noise,
     observer_impact,
     observer_update,
     predict_touchdown,
@@ -68,7 +69,8 @@ class SensorStateEstimator:
     Args:
         env: the environment (as ``gym.make`` returns it; wrappers are looked through); it must
             expose ``robot``, ``dt``, ``u_max`` and ``sensor_layout`` and observe sensors.
-        eps: observer time constant [s] (paper: 0.02), > 0.
+        eps: observer time constant [s] (paper: 0.02), > 0; None: from the encoders' noise
+            (:func:`controllers.observer.eps_for_noise`: 0.04 s on the nominal sensors).
         initial_velocity: velocity guess ``(q1d, q2d)`` [rad/s] at the start of an episode;
             default: the environment's nominal start velocity (its configuration, not the
             episode's true state), else zero.
@@ -100,7 +102,7 @@ class SensorStateEstimator:
     def __init__(
         self,
         env: gym.Env,
-        eps: float = DEFAULT_EPS,
+        eps: float | None = None,
         initial_velocity: tuple[float, float] | None = None,
         localise: bool | None = False,
         mapping: bool = False,
@@ -121,7 +123,6 @@ class SensorStateEstimator:
         self.dt = float(u.dt)
         self.u_max = float(u.u_max)
         self.layout = u.sensor_layout
-        self.observer = HighGainObserver(self.robot, self.dt, eps)
         if initial_velocity is None:
             init = getattr(getattr(u, "settings", None), "initial_state", None)
             initial_velocity = tuple(init.qd) if init is not None else (0.0, 0.0)
@@ -144,9 +145,11 @@ class SensorStateEstimator:
                 "localise and mapping cannot be combined yet: a map built from the scans is in "
                 "the frame of the dead-reckoned foot (choose one)"
             )
-        # a measured angle's error [rad]: encoder noise and quantisation; q2 reads two encoders
         enc = (sensors.encoder_noise, sensors.encoder_resolution) if sensors else (1e-3, 0.0)
-        self.angle_sigma = max(math.sqrt(2.0) * math.hypot(enc[0], enc[1] / math.sqrt(12)), 1e-4)
+        self.angle_sigma = max(angle_sigma(*enc), 1e-4)
+        self.observer = HighGainObserver(
+            self.robot, self.dt, eps_for_noise(self.angle_sigma) if eps is None else eps
+        )
         self.localiser: ScanLocaliser | None = None
         self.map: ScanMap | None = None
         if self.localise:

@@ -148,6 +148,28 @@ PAPER_EPS = 0.02
 #: eps^-3/2), and the observer, integrating the model with the applied input, lags little.
 DEFAULT_EPS = 0.04
 
+#: the encoders :data:`DEFAULT_EPS` was chosen for, the envs' nominal sensors
+#: (``configs/envs/base.yaml``): Gaussian noise and quantisation step of each encoder [rad]
+NOMINAL_ENCODER_NOISE = 0.001
+NOMINAL_ENCODER_RESOLUTION = 2.0 * math.pi / 4096.0
+
+
+def angle_sigma(encoder_noise: float, encoder_resolution: float) -> float:
+    """Standard deviation [rad] of a decoded angle, from each encoder's Gaussian noise and
+    quantisation step [rad] (its uniform error): ``q2`` reads two encoders."""
+    return math.sqrt(2.0) * math.hypot(encoder_noise, encoder_resolution / math.sqrt(12.0))
+
+
+def eps_for_noise(sigma: float) -> float:
+    """The observer time constant [s] for decoded angles of standard deviation ``sigma``
+    [rad]: :data:`DEFAULT_EPS` on the nominal encoders or quieter ones, longer on noisier
+    ones, ``DEFAULT_EPS (sigma / sigma_nominal)^(2/3)``, which keeps the velocity estimate's
+    noise (``sigma eps^-3/2``) at its level on the nominal encoders."""
+    if not (math.isfinite(sigma) and sigma >= 0):
+        raise ValueError(f"angle sigma = {sigma!r}; allowed: a number >= 0 [rad]")
+    nominal = angle_sigma(NOMINAL_ENCODER_NOISE, NOMINAL_ENCODER_RESOLUTION)
+    return DEFAULT_EPS * max(1.0, sigma / nominal) ** (2.0 / 3.0)
+
 
 def substeps_for(dt: float, eps: float) -> int:
     """Number of RK4 sub-steps that keeps each one at most ``eps / 4`` long."""

@@ -44,7 +44,6 @@ from envs.physics.actuator import action_from_input, input_from_action
 from .controller import ControllerConfig, PDController, TransverseController
 from .estimator import IMPACT, START, SensorStateEstimator
 from .identification import SwingIdentifier, robot_from_coefficients
-from .observer import DEFAULT_EPS
 from .planner import GaitPlanner, PlannerConfig
 from .records import IdentificationRecord
 
@@ -67,8 +66,9 @@ class ReferencePolicy:
         env: the environment (as ``gym.make`` returns it; wrappers are looked through).
         config: :class:`ControllerConfig` or dict (default: replan at every footstep, h = 3).
         planner: :class:`GaitPlanner`, :class:`PlannerConfig`, dict or None (robot default).
-        eps: observer time constant [s] (default :data:`controllers.observer.DEFAULT_EPS`,
-            0.04; the paper's: 0.02).
+        eps: observer time constant [s]; None: from the encoders' noise
+            (:func:`controllers.observer.eps_for_noise`: 0.04 on the nominal sensors, 0.11 with
+            five times their noise; the paper's: 0.02).
         settle_time: time after the start at which the current step is replanned from the
             observer's estimate [s].
         initial_velocity: velocity guess ``(q1d, q2d)`` [rad/s] for the observer at the start;
@@ -103,7 +103,7 @@ class ReferencePolicy:
         env: gym.Env,
         config: ControllerConfig | dict | None = None,
         planner: GaitPlanner | PlannerConfig | dict | None = None,
-        eps: float = DEFAULT_EPS,
+        eps: float | None = None,
         settle_time: float = 0.1,
         initial_velocity: tuple[float, float] | None = None,
         record_history: bool = False,

@@ -1,11 +1,21 @@
-"""High-gain observer: convergence at the designed rate, impacts, quantised measurements."""
+"""High-gain observer: convergence at the designed rate, impacts, quantised and noisy
+measurements, the time constant chosen from the encoders' noise."""
 
 import math
 
 import numpy as np
 import pytest
 
-from controllers.observer import HighGainObserver, observer_update, predict_touchdown
+from controllers.observer import (
+    DEFAULT_EPS,
+    NOMINAL_ENCODER_NOISE,
+    NOMINAL_ENCODER_RESOLUTION,
+    HighGainObserver,
+    angle_sigma,
+    eps_for_noise,
+    observer_update,
+    predict_touchdown,
+)
 from envs.physics.params import RobotParams
 from envs.physics.passive import CLASSIC_CYCLE
 from envs.physics.simulator import Simulator
@@ -17,9 +27,11 @@ QD0 = np.array(CLASSIC_CYCLE.qd)
 DT = 0.005
 
 
-def _run(robot, observer, T, quantum=0.0, locate=True):
-    """Passive walk; the observer sees (optionally quantised) angles only. Returns the time,
-    true states, estimates, and touchdown errors (time [s], foothold [m])."""
+def _run(robot, observer, T, quantum=0.0, locate=True, noise=0.0, seed=0):
+    """Passive walk; the observer sees (optionally quantised, optionally noisy: Gaussian of
+    standard deviation ``noise`` [rad]) angles only. Returns the time, true states, estimates,
+    and touchdown errors (time [s], foothold [m])."""
+    rng = np.random.default_rng(seed)
     terrain = Terrain.slope(CLASSIC_CYCLE.slope)
     sim = Simulator(robot, terrain, 1, dt=DT)
     sim.reset(Q0, QD0)
@@ -35,6 +47,8 @@ def _run(robot, observer, T, quantum=0.0, locate=True):
         q = sim.q[0].copy()
         if quantum:
             q = quantum * np.round(q / quantum)
+        if noise:
+            q = q + rng.normal(0.0, noise, 2)
         if ev.n_impacts[0]:
             found, tau, xpre, fx = predict_touchdown(
                 P, x_before, 0.0, DT, tx, ty, tx.size, foot[0], foot[1], 16, 0.1 * robot.l
@@ -95,3 +109,26 @@ def test_bad_settings_raise(classic):
     for dt, eps in ((0.0, 0.02), (0.005, 0.0), (math.nan, 0.02), (0.005, -1.0)):
         with pytest.raises(ValueError):
             HighGainObserver(classic, dt, eps)
+
+
+def test_the_time_constant_from_the_encoders_noise_keeps_the_velocity_noise(classic):
+    nominal = angle_sigma(NOMINAL_ENCODER_NOISE, NOMINAL_ENCODER_RESOLUTION)
+    assert eps_for_noise(nominal) == pytest.approx(DEFAULT_EPS)
+    assert eps_for_noise(0.0) == DEFAULT_EPS  # quieter encoders keep the default
+    noisy = angle_sigma(5 * NOMINAL_ENCODER_NOISE, NOMINAL_ENCODER_RESOLUTION)
+    assert eps_for_noise(noisy) == pytest.approx(0.1105, abs=5e-4)
+
+    def velocity_rms(sigma, eps):
+        obs = HighGainObserver(classic, DT, eps)
+        obs.reset(Q0, QD0)
+        t, x, xh, _ = _run(classic, obs, 2.0, noise=sigma, seed=3)
+        return float(np.sqrt(np.mean((xh[t > 0.3, 2:] - x[t > 0.3, 2:]) ** 2)))
+
+    base = velocity_rms(nominal, DEFAULT_EPS)
+    # five times the noise through the default observer: velocity noise about 4.6 times
+    assert velocity_rms(noisy, DEFAULT_EPS) > 3.0 * base
+    # through the longer time constant: back to the nominal level (the eps^-3/2 law)
+    assert velocity_rms(noisy, eps_for_noise(noisy)) == pytest.approx(base, rel=0.3)
+    for bad in (-1e-3, math.nan):
+        with pytest.raises(ValueError, match="angle sigma"):
+            eps_for_noise(bad)

@@ -63,6 +63,26 @@ def test_reference_policy_climbs_the_stairs_up_course():
         assert foot == pytest.approx(0.02) and info["stance_foot"][1] == pytest.approx(0.02)
 
 
+# validation courses of the stairs on which the observer's fixed 0.04 s trips with encoder noise
+# of 0.01 rad (10 times the nominal): it trips before the first stair, 0.27-0.29 m along
+NOISY_COURSES = (1000011, 1000016, 1000017, 1000023)
+
+
+def test_the_observer_follows_the_encoders_noise_and_the_noisy_stairs_are_walked():
+    """Encoders ten times noisier than nominal: the default observer time constant is then
+    0.175 s (controllers.observer.eps_for_noise), and the reference walks past both stairs on
+    courses where the fixed 0.04 s tripped."""
+    env = gym.make("roughwalk/CompassGaitStairs-v0", sensors={"encoder_noise": 0.01})
+    policy = make_reference_policy(env)
+    assert policy.estimator.observer.eps == pytest.approx(0.175, abs=1e-3)
+    for seed in NOISY_COURSES:
+        obs, info = env.reset(seed=seed)
+        policy.reset()
+        while info["distance"] < COURSE_END:
+            obs, _, terminated, truncated, info = env.step(policy(obs))
+            assert not (terminated or truncated), (seed, info["failure"], info["distance"])
+
+
 def test_same_seed_same_actions_and_diagnostics():
     env = gym.make("roughwalk/CompassGaitFlat-v0")
     policy = make_reference_policy(env)
