@@ -47,6 +47,7 @@ from commands.cli import (
 from commands.mfpt import save_figure
 from controllers.basin import (
     COORDS,
+    DEFAULT_V_TOL,
     NO_STATE,
     BasinSample,
     LevelSet,
@@ -93,9 +94,9 @@ def configure(parser: argparse.ArgumentParser) -> None:
     parser.add_argument(
         "--v-tol",
         type=float_range(0, lo_open=True),
-        default=0.01,
+        default=DEFAULT_V_TOL,
         help="largest V at the end that counts as converged (V of the unperturbed gait after "
-        "16 footsteps: about 0.002)",
+        "16 footsteps: about 0.008)",
     )
     parser.add_argument(
         "--slices", type=int_range(0, 200), default=9, help="grid size of the 2-D slices (0: none)"

@@ -45,6 +45,7 @@ from .planner import GaitPlanner, PeriodicGait
 from .transverse import StepModel
 
 __all__ = [
+    "DEFAULT_V_TOL",
     "BasinSample",
     "LevelSet",
     "PeriodicReference",
@@ -60,6 +61,11 @@ __all__ = [
 COORDS = ("I", "y", "y_dot")
 #: the end of a perturbation that has no post-impact state (not a start, left out of the counts)
 NO_STATE = "no state"
+
+
+#: largest ``V`` at the end of a start that counts as converged: about four times the floor the
+#: unperturbed gait settles at (0.008 after 16 footsteps; the 5 ms zero-order hold)
+DEFAULT_V_TOL = 0.03
 
 
 @dataclass
@@ -148,7 +154,7 @@ def run_perturbation(
     ref: PeriodicReference,
     z: Sequence[float],
     steps: int = 16,
-    v_tol: float = 0.01,
+    v_tol: float = DEFAULT_V_TOL,
     dt: float = 0.005,
 ) -> BasinSample:
     """Simulate the reference controller from the perturbed post-impact state ``z``.
@@ -203,7 +209,7 @@ def sample_basin(
     per_radius: int,
     seed: int = 0,
     steps: int = 16,
-    v_tol: float = 0.01,
+    v_tol: float = DEFAULT_V_TOL,
     on_sample: Callable[[BasinSample], None] | None = None,
 ) -> list[BasinSample]:
     """Perturbations ``z = r L^-T u`` (``P = L L'``, ``u`` uniform on the unit sphere), so that
@@ -359,7 +365,7 @@ def slice_grid(
     extent: tuple[float, float],
     n: int,
     steps: int = 16,
-    v_tol: float = 0.01,
+    v_tol: float = DEFAULT_V_TOL,
     on_sample: Callable[[BasinSample], None] | None = None,
 ) -> tuple[np.ndarray, np.ndarray, list[BasinSample]]:
     """A 2-D slice: an ``n x n`` grid over coordinates ``axes`` (indices into ``[I, y,

@@ -8,6 +8,7 @@ import numpy as np
 import pytest
 
 from controllers.basin import (
+    DEFAULT_V_TOL,
     NO_STATE,
     BasinSample,
     certified_level,
@@ -37,15 +38,16 @@ def test_reference_matrix_and_unperturbed_state(ref):
 def test_zero_perturbation_converges(ref):
     s = run_perturbation(ref, [0.0, 0.0, 0.0], steps=16)
     assert s.converged and s.end == "converged" and s.footsteps == 16
-    assert s.V0 == 0.0 and s.V_end < 0.005
+    # the floor of the 5 ms zero-order hold, well inside the convergence tolerance
+    assert s.V0 == 0.0 and s.V_end < 0.01 < DEFAULT_V_TOL
 
 
 def test_huge_perturbations_fail_or_have_no_state(ref):
-    # 5 rad^2/s^2 more theta_dot^2 (2.3 instead of 0.84 rad/s): the degraded plans keep the
-    # walker going for a few footsteps, but it is far from the gait after them (or trips)
+    # 5 rad^2/s^2 more theta_dot^2 (2.4 instead of 0.91 rad/s): the degraded plans may keep
+    # the walker going for a few footsteps, but far from the gait after them, or it falls
     s = run_perturbation(ref, [5.0, 0.0, 0.0], steps=4)
-    assert not s.converged and s.end in ("trip", "not converged")
-    assert s.end == "trip" or s.V_end > 10.0
+    assert not s.converged and s.end in ("trip", "slip", "not converged")
+    assert s.end != "not converged" or s.V_end > 10.0
     # theta_dot^2 + I <= 0: no such state
     none = run_perturbation(ref, [-10.0, 0.0, 0.0], steps=4)
     assert none.end == NO_STATE and none.footsteps == 0

@@ -285,17 +285,18 @@ def test_fixed_plan_lyapunov_value_falls_from_footstep_to_footstep(terrain):
     V_start = np.array([r.V_start for r in recs])
     V_end = np.array([r.V_end for r in recs])
     if terrain == "flat":
-        assert V_start[0] == pytest.approx(0.389, abs=0.005)
-        # along each step: V_end / V_start 0.83-0.88; across each impact V does not rise
-        assert all(0.75 < r.V_ratio < 0.92 for r in recs)
+        assert V_start[0] == pytest.approx(0.686, abs=0.005)
+        # along each step: V_end / V_start 0.53-0.86; across each impact V does not rise
+        assert all(0.5 < r.V_ratio < 0.9 for r in recs)
         assert np.all(V_start[1:] < V_end[:-1])
         # from one step's start to the next: V falls by more than half (sqrt(V) by 0.68)
         assert np.all(V_start[1:] / V_start[:-1] < 0.5)
         norms = [r.max_xperp_norm for r in recs]
         assert 0.1 <= norms[0] < 0.14 and np.all(np.diff(norms) < 0)
-        assert max(r.max_abs_u for r in recs) < 5.0  # far from the actuator limit (15)
+        # inside the planner's torque reserve (0.8 of the actuator limit, 15)
+        assert max(r.max_abs_u for r in recs) < 0.8 * ctrl.robot.u_max
     else:
-        assert V_start[0] == pytest.approx(0.202, abs=0.005)
+        assert V_start[0] == pytest.approx(0.278, abs=0.005)
         # the steps before the stairs are planned close to the actuator limit (up to 12 of 15,
         # and u_max at times, depending on the plan's last bits), so V settles at the hold's
         # floor (about 0.005) after four steps instead of falling on
@@ -390,14 +391,16 @@ def tube_loop(z0, steps, **config):
     return None, ctrl.records[:-1]
 
 
-@pytest.mark.parametrize("deficit", [-0.2, -0.25])
+@pytest.mark.parametrize("deficit", [-0.35, -0.4])
 def test_replanning_within_a_step_rescues_a_start_slower_than_planned(deficit):
-    """theta_dot^2 below the plan's by 0.2-0.25 rad^2/s^2 (a quarter to a third of it: a push,
-    a lighter robot, a poor velocity estimate at the impact): tracking the plan trips; leaving
-    the tube replans the rest of the step from the actual state, and the walker goes on."""
+    """theta_dot^2 below the plan's by 0.35-0.4 rad^2/s^2 (about 40-50 % of the gait's 0.83
+    after impact: a push, a lighter robot, a poor velocity estimate at the impact): tracking
+    the plan slips; leaving the tube replans the rest of the step from the actual state, and
+    the walker goes on. (With the gait's speed reserve at mid-stance, 0.2-0.3 less is tracked
+    without a replan.)"""
     z0 = (deficit, 0.0, 0.0)
     failure, recs = tube_loop(z0, 4, tube_replans=0)
-    assert failure == "trip" and recs[0].retargets == 0
+    assert failure == "slip" and recs[0].retargets == 0
     failure, recs = tube_loop(z0, 4)  # the default: tube_energy 0.25, one replan per step
     assert ControllerConfig().tube_energy == 0.25 and ControllerConfig().tube_replans == 1
     assert failure is None and len(recs) == 4

@@ -59,7 +59,7 @@ def test_the_beam_plans_the_horizon_where_the_depth_first_search_stops_short(ris
     assert plan[-1].thetadot_minus < partial[-1].thetadot_minus - 0.05
     # sampled, not optimised: the steps keep inside the torque reserve (0.8 u_max)
     reserve = pl.config.torque_fraction * pl.params.u_max
-    assert max(float(np.max(np.abs(s.input_grid))) for s in plan) < 0.7 * reserve
+    assert max(float(np.max(np.abs(s.input_grid))) for s in plan) <= reserve + 1e-9
     # and the nonlinear model follows them under PFL (touchdown time, phase and foothold)
     for j, r in enumerate(rollout(pl, plan, course.terrain(), nsteps=HORIZON)):
         assert r["y"] < 1e-6 and r["thd_err"] < 1e-5, (j, r)

@@ -83,13 +83,15 @@ def test_a_rise_three_steps_ahead_speeds_up_the_current_step_with_the_energy_hor
 def test_the_end_speed_floor_keeps_a_speed_reserve_before_a_drop(planners):
     """Before a drop the end speed a step aims at is lowered by the height the next step loses
     (down to ``1.5 min_thetadot``); ``end_thetadot_floor`` keeps it higher, so a push or a
-    lighter robot does not stall the step. Elsewhere it changes nothing."""
+    lighter robot does not stall the step. Elsewhere it changes nothing. (On the gait without
+    the preset's reserve at mid-stance, ``gait_min_thetadot = 0``, whose end speed is the lower
+    one: the floor binds further from it.)"""
     assert planners["paper"].config.end_thetadot_floor == 0.8
-    gait = planners["paper"].periodic_gait()
+    floored = GaitPlanner("paper", {"end_thetadot_floor": 0.8, "gait_min_thetadot": 0.0})
+    plain = GaitPlanner("paper", {"end_thetadot_floor": 0.0, "gait_min_thetadot": 0.0})
+    gait = plain.periodic_gait()
     start = ((gait.q, gait.qd), (0.0, 0.0))
     drop, flat = Terrain.stairs([0.2], [-0.03]), Terrain.flat()
-    floored = GaitPlanner("paper", {"end_thetadot_floor": 0.8})  # the preset's
-    plain = GaitPlanner("paper", {"end_thetadot_floor": 0.0})
     end = {
         (name, t): pl.plan(terrain, *start, horizon=1).steps[0].thetadot_minus
         for name, pl in (("plain", plain), ("floored", floored))
@@ -101,8 +103,10 @@ def test_the_end_speed_floor_keeps_a_speed_reserve_before_a_drop(planners):
 
 
 # A post-impact state of the paper robot 0.49 m before a 1.4 cm riser (from a walk on random
-# blocks): searched depth first, the third step's first foothold leaves the climb no feasible
-# step; another foothold's pair climbs, after slowing down.
+# blocks, planned without the gait's reserve at mid-stance, gait_min_thetadot = 0): searched
+# depth first, the third step's first foothold leaves the climb no feasible step; another
+# foothold's pair climbs, after slowing down.
+_NO_RESERVE = {"gait_min_thetadot": 0.0}
 _BEFORE_RISER = (
     np.array([-0.4922489666227731, -0.30270013921240413]),
     np.array([0.4186426520283657, 0.9254189825418276]),
@@ -117,13 +121,13 @@ def test_pairs_first_finds_the_climb_that_a_foothold_before_the_riser_hides():
     terr = Terrain.stairs([0.966], [0.014])
     state, stance = _BEFORE_RISER, (0.476, 0.0)
     # (the previous order's depth-first search alone: the beam search after it plans the climb)
-    greedy = GaitPlanner("paper", {"pairs_first": 0, "beam_width": 0})
+    greedy = GaitPlanner("paper", {"pairs_first": 0, "beam_width": 0, **_NO_RESERVE})
     with pytest.raises(PlanningError) as err:
         greedy.plan(terr, state, stance, horizon=4, max_evaluations=2000)
     assert err.value.budget_exhausted and err.value.step == 3
     whole = greedy.plan(terr, state, stance, horizon=4)
     assert whole.evaluations > 4000
-    paired = GaitPlanner("paper")
+    paired = GaitPlanner("paper", _NO_RESERVE)
     assert paired.config.pairs_first == 1
     plan = paired.plan(terr, state, stance, horizon=4, max_evaluations=2000)
     assert len(plan) == 4 and plan.evaluations < 1500
