@@ -3,9 +3,12 @@ measurements, the time constant chosen from the encoders' noise."""
 
 import math
 
+import gymnasium as gym
 import numpy as np
 import pytest
 
+import envs  # noqa: F401  (registers the ids)
+from controllers.estimator import SensorStateEstimator
 from controllers.observer import (
     DEFAULT_EPS,
     NOMINAL_ENCODER_NOISE,
@@ -132,3 +135,13 @@ def test_the_time_constant_from_the_encoders_noise_keeps_the_velocity_noise(clas
     for bad in (-1e-3, math.nan):
         with pytest.raises(ValueError, match="angle sigma"):
             eps_for_noise(bad)
+
+
+def test_the_nominal_encoders_are_the_envs_defaults():
+    """eps_for_noise's reference point is the envs' sensor configuration (configs/envs/base.yaml):
+    the reference policy on a default env runs the observer at DEFAULT_EPS exactly."""
+    env = gym.make("roughwalk/CompassGaitStairs-v0")
+    sensors = env.unwrapped.settings.sensors
+    assert sensors.encoder_noise == NOMINAL_ENCODER_NOISE
+    assert sensors.encoder_resolution == NOMINAL_ENCODER_RESOLUTION
+    assert SensorStateEstimator(env).observer.eps == DEFAULT_EPS
