@@ -52,6 +52,7 @@ __all__ = [
     "MFPTEstimate",
     "MFPTResult",
     "MarkovEstimate",
+    "NothingToCount",
     "Walk",
     "estimate_mfpt",
     "geometric_check",
@@ -69,7 +70,11 @@ CENSORED = ("cap", "course_end", "time")
 #: the post-impact state's mesh of :func:`markov_mfpt`: quantile bins of the stance leg's angle
 #: ``theta`` and of its rate ``theta_dot`` (the coordinates of :attr:`Walk.states`)
 MARKOV_BINS = (6, 3)
-NOTHING_TO_COUNT = "nothing to estimate"
+
+
+class NothingToCount(ValueError):
+    """:func:`markov_mfpt` has no transition to count: no footstep leaves a cell of the mesh and
+    no walk failed (the walks themselves are fine)."""
 
 
 def _check_counts(footsteps: Any, failed: Any) -> tuple[np.ndarray, np.ndarray]:
@@ -265,6 +270,10 @@ def markov_mfpt(
         confidence: level of the bootstrap interval (walks resampled), in (0, 1).
         bootstrap: resamples, >= 100.
         seed: seed of the resampling.
+
+    Raises:
+        ValueError: bad input.
+        NothingToCount: (a ValueError) no footstep leaves a cell and no walk failed.
     """
     conf = _check_confidence(confidence)
     fails = np.asarray(failed)
@@ -295,7 +304,7 @@ def markov_mfpt(
     N, F = _chain_counts(cells, fails, n)
     lam, keep, out = _chain(N, F)
     if not math.isfinite(lam):
-        raise ValueError(f"no footstep leaves a cell and no walk failed: {NOTHING_TO_COUNT}")
+        raise NothingToCount("no footstep leaves a cell and no walk failed: nothing to estimate")
     rng = np.random.default_rng(seed)
     boot = np.empty(bootstrap)
     for b in range(bootstrap):
@@ -687,10 +696,8 @@ def _markov_or_none(
     that ends in a cell ever left, no failure): the walks are kept either way."""
     try:
         return markov_mfpt([np.array(w.states) for w in walks], failed, confidence=confidence)
-    except ValueError as exc:
-        if NOTHING_TO_COUNT in str(exc):
-            return None
-        raise
+    except NothingToCount:
+        return None
 
 
 def mfpt_sweep(

@@ -9,6 +9,7 @@ import numpy as np
 import pytest
 
 from agents.mfpt import (
+    NothingToCount,
     estimate_mfpt,
     geometric_check,
     kaplan_meier,
@@ -217,5 +218,6 @@ def test_markov_mfpt_rejects_bad_input(kwargs, match):
 def test_markov_mfpt_without_anything_to_count_is_a_clear_error():
     """Censored walks whose footsteps all end in cells never left: no chain to estimate."""
     states = [np.array([[0.0, 1.0], [0.1, 2.0]]), np.array([[0.2, 3.0]])]
-    with pytest.raises(ValueError, match="nothing to estimate"):
+    with pytest.raises(NothingToCount, match="nothing to estimate"):
         markov_mfpt(states, [False, False], bins=(2, 2), bootstrap=100)
+    assert issubclass(NothingToCount, ValueError)
