@@ -29,9 +29,9 @@ from agents.runs import (
     atomic_write,
     atomic_write_text,
     check_writable,
+    claim_output_folder,
     latest_run,
     read_manifest,
-    refuse_earlier_outputs,
 )
 from agents.stats import wilson_interval
 from agents.sweep.aggregate import GROUP_METRIC, across_seeds
@@ -323,10 +323,41 @@ def compare(
         for s in settings
         for matching in [[c for c in configs if s.matches(c)]]
     ]
-    if not dry_run:
-        check_writable(out, "--out")
-        check_writable(log_dir, "--log-dir")
-        refuse_earlier_outputs(out, OUTPUTS, overwrite, "comparison")
+    work = {
+        "episodes": episodes,
+        "seed": seed,
+        "baselines": baselines,
+        "train_missing": train_missing,
+        "progress": progress,
+        "backend": backend,
+        "workers": workers,
+        "address": address,
+    }
+    if dry_run:
+        return _compare(plan, log_dir, None, **work)
+    check_writable(out, "--out")
+    check_writable(log_dir, "--log-dir")
+    with claim_output_folder(out, OUTPUTS, overwrite, "comparison"):
+        return _compare(plan, log_dir, Path(out), **work)
+
+
+def _compare(
+    plan: list[tuple[Setting, list[AgentConfig]]],
+    log_dir: Path,
+    out: Path | None,
+    *,
+    episodes: int,
+    seed: int,
+    baselines: tuple[str, ...],
+    train_missing: bool,
+    progress: bool,
+    backend: str,
+    workers: int | None,
+    address: str | None,
+) -> Comparison:
+    """The body of :func:`compare`: train what is missing, evaluate, and write the outputs to
+    ``out``, which this process holds (None: a dry run, which lists the rows only)."""
+    dry_run = out is None
     runs: dict[tuple[str, int], Path] = {}
     jobs: dict[tuple[str, int], AgentConfig] = {}
     for _, agents in plan:
@@ -387,8 +418,6 @@ def compare(
     for row, ev in zip(rows, evaluations):
         row["summary"] = ev.summary
     seeds_stats = across_training_seeds(rows)
-    out = Path(out)
-    out.mkdir(parents=True, exist_ok=True)
     data = {
         "rows": rows,
         "across_seeds": seeds_stats,

@@ -23,13 +23,17 @@ import pickle
 import re
 import tempfile
 import zipfile
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Iterator, Sequence
+from contextlib import contextmanager, suppress
 from pathlib import Path
-from typing import Any, TextIO
+from typing import IO, Any, TextIO
 
 import yaml
 
 MANIFEST = "manifest.json"
+#: the file an output folder's writer holds locked while it writes there
+#: (:func:`claim_output_folder`)
+LOCK_FILE = ".roughwalk.lock"
 #: ``status`` of a run in its manifest
 RUNNING, INTERRUPTED, FINISHED = "running", "interrupted", "finished"
 #: attribute of a model saved by ``roughwalk train`` recording its algorithm and config (it
@@ -76,6 +80,99 @@ def refuse_earlier_outputs(
             f"--out {out}: holds an earlier {what} ({', '.join(earlier)}); choose another "
             "folder or pass --overwrite"
         )
+
+
+def _try_lock(fh: IO[str]) -> bool:
+    """Take an exclusive, non-blocking lock on the open file ``fh``; False if another process
+    holds it. The operating system drops the lock when the process ends, however it ends."""
+    try:
+        import fcntl
+    except ImportError:  # Windows
+        import msvcrt
+
+        try:
+            msvcrt.locking(fh.fileno(), msvcrt.LK_NBLCK, 1)
+        except OSError:
+            return False
+        return True
+    try:
+        fcntl.flock(fh.fileno(), fcntl.LOCK_EX | fcntl.LOCK_NB)
+    except BlockingIOError:
+        return False
+    return True
+
+
+@contextmanager
+def claim_output_folder(
+    out: str | Path, names: Sequence[str] = (), overwrite: bool = False, what: str = "result"
+) -> Iterator[Path]:
+    """Hold the output folder ``out`` for this process while a command writes there.
+
+    Creates the folder and locks its :data:`LOCK_FILE`, so that a second command on the same
+    folder stops with a clear error instead of both writing the same files; then refuses an
+    earlier run's outputs as :func:`refuse_earlier_outputs` does. The lock file is removed at
+    the end; the lock itself goes with the process, so an interrupted command leaves nothing
+    that blocks the next one. A folder this call created is removed again when the command
+    fails before writing anything into it.
+
+    Args:
+        out: the command's output folder (``--out``).
+        names: the file names the command writes there (none: only hold the folder).
+        overwrite: the user's ``--overwrite``.
+        what: what those files are, for the message.
+
+    Raises:
+        ValueError: another process holds the folder, or it holds earlier outputs.
+    """
+    out = Path(out)
+    created = not out.exists()
+    try:
+        out.mkdir(parents=True, exist_ok=True)
+    except OSError as exc:
+        raise ValueError(f"--out {out}: cannot create the folder ({exc.strerror})") from None
+    lock_path = out / LOCK_FILE
+    fh = _lock_file(out, lock_path)
+    try:
+        try:
+            refuse_earlier_outputs(out, names, overwrite, what)
+            yield out
+        finally:
+            with suppress(OSError):  # still locked: no other process holds it meanwhile
+                lock_path.unlink(missing_ok=True)
+            if created and not any(out.iterdir()):
+                out.rmdir()
+    finally:
+        fh.close()
+
+
+def _lock_file(out: Path, lock_path: Path) -> IO[str]:
+    """Open and lock ``out``'s lock file; raise ValueError when another process holds it."""
+    while True:
+        try:
+            fh = open(lock_path, "a+", encoding="utf-8")
+        except OSError as exc:
+            raise ValueError(
+                f"--out {out}: cannot write {lock_path.name} ({exc.strerror})"
+            ) from None
+        if not _try_lock(fh):
+            fh.seek(0)
+            holder = fh.read().strip() or "another process"
+            fh.close()
+            raise ValueError(
+                f"--out {out}: another roughwalk command is writing there ({holder}); wait for "
+                "it to finish or choose another folder"
+            )
+        try:  # the holder before us may have removed the file between our open and our lock
+            if os.path.samestat(os.fstat(fh.fileno()), os.stat(lock_path)):
+                break
+        except FileNotFoundError:
+            pass
+        fh.close()
+    fh.seek(0)
+    fh.truncate()
+    fh.write(f"process {os.getpid()}\n")
+    fh.flush()
+    return fh
 
 
 def atomic_write_stream(path: str | Path, write: Callable[[TextIO], Any]) -> Path:

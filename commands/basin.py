@@ -34,7 +34,7 @@ from typing import Any
 
 import numpy as np
 
-from agents.runs import atomic_write_stream, refuse_earlier_outputs
+from agents.runs import atomic_write_stream, claim_output_folder
 from agents.stats import wilson_interval
 from commands.cli import (
     CONTROLLER_KERNELS,
@@ -209,7 +209,12 @@ def run(args: argparse.Namespace) -> int:
     if any(b <= a for a, b in zip(radii, radii[1:])):
         raise ValueError(f"--radii: sizes must increase, got {radii}")
     out: Path = args.out
-    refuse_earlier_outputs(out, OUTPUTS, args.overwrite)
+    with claim_output_folder(out, OUTPUTS, args.overwrite):
+        return _measure(args, out, radii)
+
+
+def _measure(args: argparse.Namespace, out: Path, radii: list[float]) -> int:
+    """``roughwalk basin``'s measurement and outputs, in the folder ``out`` it holds."""
     announce_compilation(SIMULATOR_KERNELS + CONTROLLER_KERNELS)
     t0 = time.perf_counter()
     ref = periodic_reference(args.robot)

@@ -43,7 +43,7 @@ from agents.mfpt import (
     mfpt_sweep,
 )
 from agents.policies import BASELINES
-from agents.runs import atomic_write, atomic_write_stream, refuse_earlier_outputs
+from agents.runs import atomic_write, atomic_write_stream, claim_output_folder
 from agents.sweep.aggregate import interval_text
 from commands.cli import (
     CONTROLLER_KERNELS,
@@ -270,7 +270,12 @@ def run(args: argparse.Namespace) -> int:
         policies[0], args.walks, args.walkers, args.step_cap, args.seed, args.max_step_time
     )
     out: Path = args.out
-    refuse_earlier_outputs(out, OUTPUTS, args.overwrite)
+    with claim_output_folder(out, OUTPUTS, args.overwrite):
+        return _measure(args, out, levels, policies)
+
+
+def _measure(args: argparse.Namespace, out: Path, levels: list[float], policies: list[str]) -> int:
+    """``roughwalk mfpt``'s walks and outputs, in the folder ``out`` it holds."""
     announce_compilation(
         SIMULATOR_KERNELS + (CONTROLLER_KERNELS if policies != ["passive"] else ())
     )

@@ -20,6 +20,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
+from agents.runs import claim_output_folder
 from agents.sweep.aggregate import summarize_sweep, write_summary
 from agents.sweep.backends import BACKENDS, import_ray, run_tasks
 from agents.sweep.plots import plot_sweep
@@ -125,10 +126,27 @@ def run_sweep(
         raise ValueError("--workers and --address apply to --backend ray")
     if address is not None and workers is not None:
         raise ValueError("--workers applies to a local Ray instance, not to a cluster (--address)")
-    folder = ResultsFolder(out, spec, overwrite)
+    ResultsFolder(out, spec, overwrite)  # its errors before the folder is created
     if backend == "ray":
         import_ray()
-    check_spec(spec)
+    with claim_output_folder(out, what="sweep"):
+        # again under the lock: another command may have written there meanwhile
+        folder = ResultsFolder(out, spec, overwrite)
+        check_spec(spec)
+        return _run(folder, spec, backend, workers, address, chunk, progress, plot)
+
+
+def _run(
+    folder: ResultsFolder,
+    spec: SweepSpec,
+    backend: str,
+    workers: int | None,
+    address: str | None,
+    chunk: int | None,
+    progress: bool,
+    plot: bool,
+) -> SweepResult:
+    """The body of :func:`run_sweep`, in a folder it holds."""
     done = folder.open()
     cells, seeds = spec.cells(), spec.seeds
     todo = len(cells) * len(seeds) - len(done)

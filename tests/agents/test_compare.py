@@ -10,6 +10,7 @@ import pytest
 
 from agents.compare import CONFIG_DIR, SETTINGS, chosen_model, compare
 from agents.config import load_config
+from agents.runs import claim_output_folder
 from agents.train import train
 
 
@@ -129,9 +130,15 @@ def test_a_second_comparison_keeps_the_first_unless_told_to_overwrite(tmp_path: 
         compare(**kw)
     assert not ran  # refused before any episode
     assert {p.name: p.read_bytes() for p in (tmp_path / "results").iterdir()} == first
+    # nor into a folder another comparison is writing to, even with --overwrite
+    with claim_output_folder(tmp_path / "results"):
+        with pytest.raises(ValueError, match="another roughwalk command is writing there"):
+            compare(**kw, overwrite=True)
+    assert not ran
     monkeypatch.undo()
     compare(**kw, overwrite=True, seed=5)
     assert (tmp_path / "results" / "compare.json").read_bytes() != first["compare.json"]
+    assert sorted(p.name for p in (tmp_path / "results").iterdir()) == sorted(first)
 
 
 def _compare_seeds(tmp_path: Path, name: str, **kwargs):

@@ -6,7 +6,10 @@ from __future__ import annotations
 import hashlib
 import importlib
 import json
+import os
 import shutil
+import subprocess
+import sys
 import tempfile
 from pathlib import Path
 
@@ -16,7 +19,14 @@ from stable_baselines3.common.callbacks import BaseCallback
 
 from agents.config import ConfigError, load_config
 from agents.evaluate import evaluate
-from agents.runs import atomic_write, model_algo, model_data, numbered_runs
+from agents.runs import (
+    LOCK_FILE,
+    atomic_write,
+    claim_output_folder,
+    model_algo,
+    model_data,
+    numbered_runs,
+)
 from agents.train import train
 from agents.trained import TrainedPolicy, load_policy
 
@@ -230,6 +240,61 @@ def test_files_are_written_all_or_nothing(tmp_path: Path):
         atomic_write(target, broken_writer)
     assert target.read_bytes() == b"the previous model"
     assert sorted(p.name for p in tmp_path.iterdir()) == ["model.zip"]
+
+
+HOLD = (
+    "import sys; from agents.runs import claim_output_folder\n"
+    "try:\n"
+    "    with claim_output_folder(sys.argv[1]):\n"
+    "        pass\n"
+    "except ValueError as exc:\n"
+    "    print(exc); sys.exit(2)\n"
+)
+
+
+def test_an_output_folder_is_held_by_one_command_at_a_time(tmp_path: Path):
+    out = tmp_path / "results"
+    with claim_output_folder(out, ("summary.json",)) as held:
+        assert held == out and (out / LOCK_FILE).read_text().startswith("process ")
+        # another process, and another claim in this one, are refused while it is held
+        other = subprocess.run(
+            [sys.executable, "-c", HOLD, str(out)], capture_output=True, text=True, check=False
+        )
+        assert other.returncode == 2, other.stderr
+        assert "another roughwalk command is writing there (process" in other.stdout
+        with pytest.raises(ValueError, match="another roughwalk command is writing there"):
+            with claim_output_folder(out):
+                pass
+        (out / "summary.json").write_text("the first command's result")
+    # released: no lock file left, the result kept, and the next command may write there
+    assert sorted(p.name for p in out.iterdir()) == ["summary.json"]
+    other = subprocess.run([sys.executable, "-c", HOLD, str(out)], check=False)
+    assert other.returncode == 0
+
+
+def test_a_crashed_holder_does_not_block_the_folder(tmp_path: Path):
+    out = tmp_path / "results"
+    out.mkdir()
+    # a lock file left by a process that was killed: the lock went with the process
+    (out / LOCK_FILE).write_text("process 12345\n")
+    with claim_output_folder(out):
+        assert (out / LOCK_FILE).read_text() == f"process {os.getpid()}\n"
+    assert list(out.iterdir()) == []
+
+
+def test_a_refused_or_failed_command_leaves_no_new_folder(tmp_path: Path):
+    out = tmp_path / "new" / "results"
+    with pytest.raises(RuntimeError, match="failed"):
+        with claim_output_folder(out):
+            raise RuntimeError("failed before writing")
+    assert not out.exists()
+    earlier = tmp_path / "earlier"
+    earlier.mkdir()
+    (earlier / "mfpt.json").write_text("an earlier result")
+    with pytest.raises(ValueError, match="holds an earlier result"):
+        with claim_output_folder(earlier, ("mfpt.json",)):
+            pass
+    assert [p.name for p in earlier.iterdir()] == ["mfpt.json"]
 
 
 def test_training_leaves_no_folder_in_the_system_temp_folder(smoke, tmp_path: Path, monkeypatch):

@@ -9,6 +9,7 @@ from pathlib import Path
 
 import pytest
 
+from agents.runs import LOCK_FILE, claim_output_folder
 from commands.cli import main
 
 
@@ -61,6 +62,15 @@ def test_an_earlier_result_is_kept(tmp_path: Path, capsys, command, name):
     assert "earlier result" in line and "--overwrite" in line
     assert (out / name).read_text() == "an earlier result"
     assert [p.name for p in out.iterdir()] == [name]
+
+
+@pytest.mark.parametrize("command", ["mfpt", "basin"])
+def test_a_folder_another_command_holds_is_refused(tmp_path: Path, capsys, command):
+    out = tmp_path / "r"
+    with claim_output_folder(out):
+        assert main([command, "--out", str(out)]) == 2
+        assert "another roughwalk command is writing there" in _error_line(capsys, command)
+        assert [p.name for p in out.iterdir()] == [LOCK_FILE]
 
 
 @pytest.mark.parametrize(

@@ -7,6 +7,7 @@ import sys
 import pytest
 import yaml
 
+from agents.runs import LOCK_FILE, claim_output_folder
 from commands.cli import main
 from configs import CONFIG_DIR
 
@@ -111,3 +112,13 @@ def test_another_spec_in_out_is_refused(tmp_path, capsys):
     err = capsys.readouterr().err
     assert "holds the results of another sweep spec" in err and "--overwrite" in err
     assert (out / "spec.json").read_text() == "{}"
+
+
+def test_a_sweep_into_a_folder_another_command_holds_is_refused(tmp_path, capsys):
+    out = tmp_path / "out"
+    with claim_output_folder(out):  # e.g. the same sweep started twice
+        assert main(["sweep", str(TINY), "--out", str(out), "--no-progress"]) == 2
+        err = capsys.readouterr().err.strip()
+        assert len(err.splitlines()) == 1
+        assert "another roughwalk command is writing there" in err
+        assert [p.name for p in out.iterdir()] == [LOCK_FILE]
