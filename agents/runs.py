@@ -112,8 +112,8 @@ def claim_output_folder(
     folder stops with a clear error instead of both writing the same files; then refuses an
     earlier run's outputs as :func:`refuse_earlier_outputs` does. The lock file is removed at
     the end; the lock itself goes with the process, so an interrupted command leaves nothing
-    that blocks the next one. A folder this call created is removed again when the command
-    fails before writing anything into it.
+    that blocks the next one. Folders this call created (``out`` and missing parents) are removed
+    again when the command leaves them empty (a refused or failed command).
 
     Args:
         out: the command's output folder (``--out``).
@@ -125,7 +125,7 @@ def claim_output_folder(
         ValueError: another process holds the folder, or it holds earlier outputs.
     """
     out = Path(out)
-    created = not out.exists()
+    created = [f for f in (out, *out.parents) if not f.exists()]  # to be made, innermost first
     try:
         out.mkdir(parents=True, exist_ok=True)
     except OSError as exc:
@@ -139,8 +139,10 @@ def claim_output_folder(
         finally:
             with suppress(OSError):  # still locked: no other process holds it meanwhile
                 lock_path.unlink(missing_ok=True)
-            if created and not any(out.iterdir()):
-                out.rmdir()
+            for folder in created:  # innermost first, while empty
+                if any(folder.iterdir()):
+                    break
+                folder.rmdir()
     finally:
         fh.close()
 
