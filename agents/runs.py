@@ -122,9 +122,12 @@ def claim_output_folder(
         what: what those files are, for the message.
 
     Raises:
-        ValueError: another process holds the folder, or it holds earlier outputs.
+        ValueError: ``out`` is a file or cannot be created, another process holds it, or it
+            holds earlier outputs.
     """
     out = Path(out)
+    if out.exists() and not out.is_dir():
+        raise ValueError(f"--out {out}: is a file, not a folder")
     created = [f for f in (out, *out.parents) if not f.exists()]  # to be made, innermost first
     try:
         out.mkdir(parents=True, exist_ok=True)

@@ -126,11 +126,9 @@ def run_sweep(
         raise ValueError("--workers and --address apply to --backend ray")
     if address is not None and workers is not None:
         raise ValueError("--workers applies to a local Ray instance, not to a cluster (--address)")
-    ResultsFolder(out, spec, overwrite)  # its errors before the folder is created
     if backend == "ray":
         import_ray()
     with claim_output_folder(out, what="sweep"):
-        # again under the lock: another command may have written there meanwhile
         folder = ResultsFolder(out, spec, overwrite)
         check_spec(spec)
         return _run(folder, spec, backend, workers, address, chunk, progress, plot)
