@@ -21,10 +21,19 @@ backwards the quadratic term only damps ``Z``, so there is no finite escape; the
 classical RK4 on a fixed grid per segment, with ``A, B, w`` sampled at the grid nodes and the
 midpoints (``2 n_j + 1`` samples per segment). The optimal feedback is
 ``v = K z`` with ``K = -(w R)^-1 B' Z^-1``; see :func:`solve_jump_riccati`.
+
+The equation is stiff where the weights ask for a fast closed loop (a large ``Q`` against
+``R``): its rate near ``Z`` is at most ``L = 2 |A| + 2 max(sqrt(|G| |wQ|), |wQ| |Z|)``
+(Frobenius norms; ``G = B (wR)^-1 B'``; ``2 sqrt(|G| |wQ|)`` is the rate at which ``Z``
+settles from 0 onto its equilibrium), and RK4 is stable only for ``h L`` below about 2.8. A
+grid interval with ``h L > STIFF_LIMIT`` is cut into ``ceil(h L / STIFF_LIMIT)`` RK4 steps,
+with ``A, G, wQ`` interpolated quadratically through the interval's three samples; the others
+take one step, so solves that are not stiff are unchanged.
 """
 
 from __future__ import annotations
 
+import math
 from collections.abc import Sequence
 from dataclasses import dataclass
 
@@ -32,6 +41,9 @@ import numpy as np
 from numba import njit
 
 _jit = njit(cache=True, error_model="numpy")
+
+#: largest ``h L`` of one RK4 step (``L`` the bound on the equation's rate, module docstring)
+STIFF_LIMIT = 1.0
 
 
 @_jit
@@ -68,6 +80,78 @@ def _spd_inverse(Z):
 
 
 @_jit
+def _frobenius(M):
+    acc = 0.0
+    for a in range(M.shape[0]):
+        for b in range(M.shape[1]):
+            acc += M[a, b] * M[a, b]
+    return math.sqrt(acc)
+
+
+@_jit
+def _rate_bound(Z, A, G, Qw, i0, im, i1):
+    """Bound ``L`` on the rate of the equation over one grid interval (module docstring)."""
+    nz = _frobenius(Z)
+    out = 0.0
+    for i in (i0, im, i1):
+        nq = _frobenius(Qw[i])
+        r = 2.0 * _frobenius(A[i]) + 2.0 * max(math.sqrt(_frobenius(G[i]) * nq), nq * nz)
+        if r > out:
+            out = r
+    return out
+
+
+@_jit
+def _quadratic(X, i0, im, i1, tau, out):
+    """``X`` at ``tau`` in [0, 1] of the interval, through its samples at 0, 1/2 and 1."""
+    l0 = 2.0 * (tau - 0.5) * (tau - 1.0)
+    lm = -4.0 * tau * (tau - 1.0)
+    l1 = 2.0 * tau * (tau - 0.5)
+    for a in range(out.shape[0]):
+        for b in range(out.shape[1]):
+            out[a, b] = l0 * X[i0, a, b] + lm * X[im, a, b] + l1 * X[i1, a, b]
+
+
+@_jit
+def _substeps(Z, A, G, Qw, i0, im, i1, h, m):
+    """``m`` backward RK4 steps over one grid interval of length ``h`` (``Z`` in place)."""
+    n = Z.shape[0]
+    As = np.empty((3, n, n))
+    Gs = np.empty((3, n, n))
+    Qs = np.empty((3, n, n))
+    k1 = np.empty((n, n))
+    k2 = np.empty((n, n))
+    k3 = np.empty((n, n))
+    k4 = np.empty((n, n))
+    Zt = np.empty((n, n))
+    T = np.empty((n, n))
+    dt = 1.0 / m
+    hs = h / m
+    for r in range(m):
+        tau = 1.0 - r * dt
+        for p, t in enumerate((tau, tau - 0.5 * dt, tau - dt)):
+            _quadratic(A, i0, im, i1, t, As[p])
+            _quadratic(G, i0, im, i1, t, Gs[p])
+            _quadratic(Qw, i0, im, i1, t, Qs[p])
+        _rhs(Z, As[0], Gs[0], Qs[0], T, k1)
+        for a in range(n):
+            for b in range(n):
+                Zt[a, b] = Z[a, b] + 0.5 * hs * k1[a, b]
+        _rhs(Zt, As[1], Gs[1], Qs[1], T, k2)
+        for a in range(n):
+            for b in range(n):
+                Zt[a, b] = Z[a, b] + 0.5 * hs * k2[a, b]
+        _rhs(Zt, As[1], Gs[1], Qs[1], T, k3)
+        for a in range(n):
+            for b in range(n):
+                Zt[a, b] = Z[a, b] + hs * k3[a, b]
+        _rhs(Zt, As[2], Gs[2], Qs[2], T, k4)
+        for a in range(n):
+            for b in range(n):
+                Z[a, b] += (hs / 6.0) * (k1[a, b] + 2.0 * k2[a, b] + 2.0 * k3[a, b] + k4[a, b])
+
+
+@_jit
 def _solve_segments(A, G, Qw, ds, nsteps, offs, F, Qj_inv, Znodes, node_offs):
     """Backward RK4 over all segments; ``Znodes`` receives ``Z`` at every grid node."""
     S = nsteps.shape[0]
@@ -101,6 +185,11 @@ def _solve_segments(A, G, Qw, ds, nsteps, offs, F, Qj_inv, Znodes, node_offs):
             i1 = o + 2 * k + 2
             im = o + 2 * k + 1
             i0 = o + 2 * k
+            rate = _rate_bound(Z, A, G, Qw, i0, im, i1)
+            if h * rate > STIFF_LIMIT:
+                _substeps(Z, A, G, Qw, i0, im, i1, h, int(math.ceil(h * rate / STIFF_LIMIT)))
+                Znodes[no + k] = Z
+                continue
             _rhs(Z, A[i1], G[i1], Qw[i1], T, k1)
             for a in range(n):
                 for b in range(n):

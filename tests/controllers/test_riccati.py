@@ -34,8 +34,9 @@ def _samples(nsteps):
     return A, B, W
 
 
-def _reference(F, Q, R, Qj):
-    """Reference in Z alone: Z-equation by DOP853 at tight tolerance, jumps in the plain form."""
+def _reference(F, Q, R, Qj, method="DOP853"):
+    """Reference in Z alone: Z-equation by DOP853 (Radau where stiff) at tight tolerance, jumps
+    in the plain form."""
     ends = np.cumsum(LENGTHS)
     starts = ends - np.array(LENGTHS)
     Z = np.zeros((3, 3))
@@ -50,7 +51,7 @@ def _reference(F, Q, R, Qj):
             A, B, w = _A(s, j), _B(s, j), _w(s, j)
             return (Zm @ A.T + A @ Zm - B @ np.linalg.solve(w * R, B.T) + w * Zm @ Q @ Zm).ravel()
 
-        r = solve_ivp(f, (ends[j], starts[j]), Z.ravel(), method="DOP853", rtol=1e-12, atol=1e-14)
+        r = solve_ivp(f, (ends[j], starts[j]), Z.ravel(), method=method, rtol=1e-12, atol=1e-16)
         Z = r.y[:, -1].reshape(3, 3)
         out[("start", j)] = Z
     return out
@@ -90,6 +91,37 @@ def test_gain_and_lyapunov_matrix(problem):
             Bk, wk = B[j][2 * k], W[j][2 * k]
             np.testing.assert_allclose(sol.K[j][k], -np.linalg.solve(wk * R, Bk.T) @ Zinv)
             assert np.all(np.linalg.eigvalsh(Z) > 0)
+
+
+def test_stiff_weights_are_substepped_and_match_a_stiff_solver():
+    # a closed loop of about 400 rad/s on the second coordinate: one RK4 step per grid interval
+    # (h = 0.025) would diverge to NaN; the substepped intervals follow Radau's solution
+    rng = np.random.default_rng(0)
+    F = [np.eye(3) + 0.3 * rng.standard_normal((3, 3)) for _ in range(3)]
+    Q, R, Qj = np.diag([1.0, 160000.0, 800.0]), np.eye(1), np.eye(3)
+    ref = _reference(F, Q, R, Qj, method="Radau")
+    A, B, W = _samples(20)
+    sol = solve_jump_riccati(A, B, LENGTHS, F, Q, R, Qj, w=W, gain_segments=1)
+    for j in range(len(LENGTHS)):
+        assert np.all(np.isfinite(sol.Z[j]))
+        Zr = ref[("start", j)]
+        assert np.abs(sol.Z[j][0] - Zr).max() < 1e-4 * np.abs(Zr).max()
+    assert np.all(np.isfinite(sol.K[0]))
+
+
+def test_stiff_gain_reaches_the_algebraic_riccati_gain():
+    # y'' = v with Q = diag(160000, 800), R = 1 over a long horizon: the gain at the start is
+    # the infinite-horizon LQR gain, PD with kp = 400, kd = 40 (scipy's CARE gives the same)
+    from scipy.linalg import solve_continuous_are
+
+    n = 40
+    A = [np.tile(np.array([[0.0, 1.0], [0.0, 0.0]]), (2 * n + 1, 1, 1))] * 2
+    B = [np.tile(np.array([[0.0], [1.0]]), (2 * n + 1, 1, 1))] * 2
+    Q = np.diag([160000.0, 800.0])
+    sol = solve_jump_riccati(A, B, [1.0, 1.0], [np.eye(2)], Q, np.eye(1), np.eye(2))
+    P = solve_continuous_are(A[0][0], B[0][0], Q, np.eye(1))
+    np.testing.assert_allclose(sol.K[0][0], -(B[0][0].T @ P), rtol=1e-6)
+    np.testing.assert_allclose(sol.K[0][0], [[-400.0, -40.0]], rtol=1e-6)
 
 
 def test_jump_at_singular_Z_uses_woodbury_form():
