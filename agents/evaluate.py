@@ -47,6 +47,7 @@ from agents.runs import atomic_write_stream, find_vecnormalize, load_vecnormaliz
 from agents.trained import TrainedPolicy, load_policy
 from controllers.controller import ControllerConfig, PDController, TransverseController
 from controllers.planner import PlannerConfig
+from controllers.reference import MAX_LEG_MARGIN
 from envs.config_util import real_setting
 
 #: the baselines that take a controller mode (``--controller-mode``)
@@ -382,6 +383,7 @@ def make_eval_env(
     controller: dict[str, Any] | None = None,
     observer_eps: float | None = None,
     identify: int | None = None,
+    leg_margin: float | None = None,
 ) -> tuple[gym.Env, Policy, str, dict[str, Any]]:
     """The env (with the agent's wrappers) and the policy for ``policy_spec``.
 
@@ -410,6 +412,9 @@ def make_eval_env(
         identify: for the ``pd`` and ``reference`` baselines, identify the swing dynamics
             online after each of the first ``identify`` footsteps (an integer >= 0; 0: off;
             None: the policy's default, 6; see :class:`controllers.ReferencePolicy`).
+        leg_margin: for the ``pd`` and ``reference`` baselines, foothold margins widened by
+            this many standard deviations of the leg-length uncertainty (in [0, 10]; None: the
+            policy's default, 0, off; see :class:`controllers.ReferencePolicy`).
 
     Returns:
         ``(env, policy, env_id, env_kwargs)``, with the env id and keyword arguments used.
@@ -421,6 +426,7 @@ def make_eval_env(
         "controller": controller,
         "observer_eps": observer_eps,
         "identify": identify,
+        "leg_margin": leg_margin,
     }
     for name, value in settings.items():
         if value is not None and policy_spec not in CONTROLLED_BASELINES:
@@ -448,6 +454,14 @@ def make_eval_env(
         if isinstance(identify, bool) or not isinstance(identify, int) or identify < 0:
             raise ValueError(f"identify = {identify!r}; allowed: an integer >= 0 (footsteps)")
         options["identify"] = identify
+    if leg_margin is not None:
+        margin = real_setting("leg_margin", leg_margin, f"a number in [0, {MAX_LEG_MARGIN}]")
+        if not 0 <= margin <= MAX_LEG_MARGIN:
+            raise ValueError(
+                f"leg_margin = {leg_margin!r}; allowed: a number in [0, {MAX_LEG_MARGIN}] "
+                "(standard deviations)"
+            )
+        options["leg_margin"] = margin
     trained = None
     if policy_spec not in BASELINES:
         trained = load_trained(policy_spec, vecnormalize=vecnormalize, algo=algo)
@@ -509,6 +523,7 @@ def evaluate(
     controller: dict[str, Any] | None = None,
     observer_eps: float | None = None,
     identify: int | None = None,
+    leg_margin: float | None = None,
 ) -> Evaluation:
     """Evaluate a baseline (``passive``, ``pd``, ``reference``) or a trained model (path).
 
@@ -521,10 +536,11 @@ def evaluate(
         vecnormalize: a trained model's ``VecNormalize`` statistics (default: beside it).
         progress: show a progress bar.
         algo: a trained model's algorithm (default: from its run or the file).
-        controller_mode, plan_steps, perception, planner, controller, observer_eps, identify:
-            the ``pd`` and ``reference`` baselines' controller mode, fixed-plan length,
-            perception, planner and controller settings, observer time constant and online
-            identification (see :func:`make_eval_env`).
+        controller_mode, plan_steps, perception, planner, controller, observer_eps, identify,
+        leg_margin: the ``pd`` and ``reference`` baselines' controller mode, fixed-plan length,
+            perception, planner and controller settings, observer time constant, online
+            identification and foothold margins from the leg-length uncertainty (see
+            :func:`make_eval_env`).
     """
     seeds = eval_seeds(seed, episodes)
     env, policy, env_id, env_kwargs = make_eval_env(
@@ -540,6 +556,7 @@ def evaluate(
         controller,
         observer_eps,
         identify,
+        leg_margin,
     )
     mass, g, _ = _robot(env)
     iterator: Any = seeds

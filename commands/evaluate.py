@@ -59,10 +59,12 @@ from commands.cli import (
     SIMULATOR_KERNELS,
     announce_compilation,
     env_id,
+    float_range,
     int_range,
     output_file,
 )
 from controllers.controller import MODES
+from controllers.reference import MAX_LEG_MARGIN
 
 ALGOS = ("ppo", "sac", "td3", "a2c")
 
@@ -286,6 +288,13 @@ def configure(parser: argparse.ArgumentParser) -> None:
         "the data reject the nominal one (default 6; 0: the nominal model throughout)",
     )
     parser.add_argument(
+        "--leg-margin",
+        type=float_range(0.0, MAX_LEG_MARGIN),
+        metavar="Z",
+        help=f"the {' and '.join(CONTROLLED_BASELINES)} policies widen their foothold margins by "
+        "Z standard deviations of the leg-length uncertainty (the localiser's; default 0, off)",
+    )
+    parser.add_argument(
         "--json", type=output_file, metavar="FILE", help="write summary and episodes as JSON"
     )
     parser.add_argument(
@@ -379,6 +388,7 @@ def run(args: argparse.Namespace) -> int:
             controller=dict(args.controller) if args.controller else None,
             observer_eps=args.observer_eps,
             identify=args.identify,
+            leg_margin=args.leg_margin,
         )
     except ValueError as exc:
         message = str(exc)

@@ -335,6 +335,7 @@ class TransverseController:
             self.planner = GaitPlanner(self.robot, planner)
         self._configured = self.planner  # the planner before adjust_planner's changes
         self._adjustment: tuple = ()
+        self._extra_margin = 0.0  # widen_margins
         self.records: list[StepRecord] = []
         self.plan: Plan | None = None
         self.solution: HorizonSolution | None = None
@@ -378,11 +379,38 @@ class TransverseController:
         if key != self._adjustment:
             self._use_adjustment(key)
 
+    @property
+    def configured_planner(self) -> GaitPlanner:
+        """The planner as configured (for the model in use), before :meth:`adjust_planner`'s
+        and :meth:`widen_margins`' changes."""
+        return self._configured
+
+    def widen_margins(self, extra: float) -> None:
+        """Keep footholds ``extra`` [m] further from faces and kinks than the configured
+        ``PlannerConfig.edge_margin`` from the next planning call on (where a foot lands is
+        uncertain: a leg length not yet measured, say), on top of :meth:`adjust_planner`'s
+        changes; 0: the configured margin.
+
+        Raises:
+            ValueError: ``extra`` negative or not finite.
+        """
+        extra = float(extra)
+        if not (math.isfinite(extra) and extra >= 0):
+            raise ValueError(f"extra margin = {extra!r}; allowed: >= 0 m")
+        if extra != self._extra_margin:
+            self._extra_margin = extra
+            self._use_adjustment(self._adjustment)
+
     def _use_adjustment(self, adjustment: tuple) -> None:
         """Plan with the configured planner changed by ``adjustment`` (sorted ``(field,
-        value)`` pairs; a bad one raises before anything changes)."""
+        value)`` pairs; a bad one raises before anything changes) and the margins widened by
+        :meth:`widen_margins`."""
         base = self._configured
-        self.planner = base.relaxed(**dict(adjustment)) if adjustment else base
+        changes = dict(adjustment)
+        if self._extra_margin > 0:
+            margin = changes.get("edge_margin", base.config.edge_margin)
+            changes["edge_margin"] = margin + self._extra_margin
+        self.planner = base.relaxed(**changes) if changes else base
         self._adjustment = adjustment
         self._relaxed.clear()  # the degradations' planners derive from this one
 

@@ -57,6 +57,10 @@ DRIFT_Z = 1.5
 #: an identified robot replaces the one in use when a coefficient or the leg length changes by
 #: more than this fraction (a new planner computes its periodic gait, about 0.1-0.5 s)
 MODEL_CHANGE = 0.01
+#: the leg-length margin's widening is rounded to this [m] (a new planner whenever it changes)
+MARGIN_QUANTUM = 0.0025
+#: the largest leg_margin [standard deviations]
+MAX_LEG_MARGIN = 10.0
 
 
 class ReferencePolicy:
@@ -93,6 +97,13 @@ class ReferencePolicy:
             0: off (the nominal model throughout). Default :data:`DEFAULT_IDENTIFY`. The fits
             are in :attr:`diagnostics` (``"identified"``: one
             :class:`controllers.records.IdentificationRecord` per fit).
+        leg_margin: foothold margins from the leg-length uncertainty: at every touchdown the
+            planner's ``edge_margin`` is widened by ``leg_margin`` standard deviations of where
+            a step of ``step_length`` lands, from the localiser's belief about the drift rate
+            (the relative error of the model's step length, i.e. of its leg length), rounded
+            to :data:`MARGIN_QUANTUM`; wide at the first footsteps, before the scans measure
+            the leg, and about nothing once they have. Needs ``localise``; 0 (default): off.
+            [standard deviations], in [0, :data:`MAX_LEG_MARGIN`].
         controller_kwargs: passed to the controller class (``kp``, ``kd`` for :class:`PDPolicy`).
     """
 
@@ -111,6 +122,7 @@ class ReferencePolicy:
         mapping: bool = False,
         odometry_error: float = 0.02,
         identify: int = DEFAULT_IDENTIFY,
+        leg_margin: float = 0.0,
         **controller_kwargs: Any,
     ):
         est = self.estimator = SensorStateEstimator(
@@ -123,6 +135,12 @@ class ReferencePolicy:
         if identify < 0:
             raise ValueError(f"identify = {identify!r}; allowed: an integer >= 0 (footsteps)")
         self.identify = int(identify)
+        leg_margin = float(leg_margin)
+        if not (math.isfinite(leg_margin) and 0 <= leg_margin <= MAX_LEG_MARGIN):
+            raise ValueError(
+                f"leg_margin = {leg_margin!r}; allowed: [0, {MAX_LEG_MARGIN}] standard deviations"
+            )
+        self.leg_margin = leg_margin
         self.identifier: SwingIdentifier | None = None
         if self.identify:
             self.identifier = SwingIdentifier(self.robot, est.dt, est.angle_sigma)
@@ -222,6 +240,8 @@ class ReferencePolicy:
                 self._identify()
                 self._stance_q, self._stance_u = [], []
             self._stance_q.append(q.copy())
+        if event in (START, IMPACT):
+            self._widen_margins()
         if event == START:
             self.controller.reset(
                 x[:2].copy(),
@@ -258,6 +278,16 @@ class ReferencePolicy:
             h["stance_leg"].append(est.stance_leg)
             h["nominal"].append(self.controller.nominal(x[1]))
         return u
+
+    def _widen_margins(self) -> None:
+        """Widen the planner's foothold margins by :attr:`leg_margin` standard deviations of
+        where a step of the configured length lands from the leg-length uncertainty (the
+        localiser's drift-rate belief), in steps of :data:`MARGIN_QUANTUM`."""
+        loc = self.estimator.localiser
+        if not self.leg_margin or loc is None:
+            return
+        sd = self.leg_margin * self.controller.configured_planner.config.step_length * loc.drift_sd
+        self.controller.widen_margins(MARGIN_QUANTUM * math.floor(sd / MARGIN_QUANTUM + 0.5))
 
     def _identify(self) -> None:
         """A stance ended: fit the swing dynamics to the stances so far and switch the model

@@ -233,8 +233,9 @@ def test_planner_controller_and_observer_options_reach_the_reference_policy():
         controller={"horizon": 2},
         observer_eps=0.03,
         identify=2,
+        leg_margin=2.5,
     )
-    assert policy.identify == 2
+    assert policy.identify == 2 and policy.leg_margin == 2.5
     ctrl = policy.controller
     assert ctrl.planner.config.min_thetadot == 0.45
     # the rest of the planner config is the robot preset's
@@ -258,6 +259,9 @@ def test_planner_controller_and_observer_options_reach_the_reference_policy():
         ("reference", {"identify": -1}, r"identify = -1; allowed: an integer >= 0"),
         ("reference", {"identify": True}, r"identify = True; allowed: an integer >= 0"),
         ("passive", {"identify": 0}, r"identify: applies to the pd and reference"),
+        ("reference", {"leg_margin": -0.5}, r"leg_margin = -0.5; allowed: a number in \[0, 10"),
+        ("reference", {"leg_margin": "wide"}, r"leg_margin = 'wide'; allowed"),
+        ("passive", {"leg_margin": 1.0}, r"leg_margin: applies to the pd and reference"),
     ],
 )
 def test_bad_controller_options_are_clear_errors(policy, options, match):

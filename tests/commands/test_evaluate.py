@@ -228,6 +228,8 @@ def test_controller_settings_from_the_command_line(tmp_path: Path, capsys, episo
         (["--policy", "passive", "--observer-eps", "0.02"], "applies to the pd and reference"),
         (["--policy", "passive", "--identify", "0"], "identify: applies to the pd and reference"),
         (["--policy", "reference", "--identify", "-1"], "--identify: must be"),
+        (["--policy", "reference", "--leg-margin", "11"], "--leg-margin: must be"),
+        (["--policy", "passive", "--leg-margin", "1"], "leg_margin: applies to the pd and"),
     ]
     for extra, message in bad:
         assert main([*argv, *extra]) == 2

@@ -457,3 +457,25 @@ def test_adjusted_planner_settings_apply_from_the_next_plan_and_survive_a_robot_
         ctrl.adjust_planner(foothold_shift=1.0)
     with pytest.raises(ValueError, match="no_such"):
         ctrl.adjust_planner(no_such=1.0)
+
+
+def test_widened_margins_compose_with_adjustments_and_survive_a_robot_switch():
+    """``widen_margins`` adds to the configured edge margin from the next plan on, on top of
+    ``adjust_planner``'s changes; 0 restores the configured margin; bad values raise."""
+    ctrl = TransverseController("paper", "flat")
+    base = ctrl.planner.config.edge_margin
+    ctrl.widen_margins(0.01)
+    assert ctrl.planner.config.edge_margin == pytest.approx(base + 0.01)
+    assert ctrl.configured_planner.config.edge_margin == base
+    ctrl.adjust_planner(foothold_shift=0.02)
+    cfg = ctrl.planner.config
+    assert cfg.foothold_shift == 0.02 and cfg.edge_margin == pytest.approx(base + 0.01)
+    relaxed = ctrl._planner_for((("torque_fraction", 1.0),))
+    assert relaxed.config.edge_margin == pytest.approx(base + 0.01)
+    ctrl.set_robot(ctrl.robot.replace(l=0.33))
+    assert ctrl.planner.config.edge_margin == pytest.approx(base + 0.01)
+    ctrl.widen_margins(0.0)
+    assert ctrl.planner.config.edge_margin == base and ctrl.planner.config.foothold_shift == 0.02
+    for bad in (-0.01, float("nan")):
+        with pytest.raises(ValueError, match="extra margin"):
+            ctrl.widen_margins(bad)

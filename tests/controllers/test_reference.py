@@ -118,6 +118,36 @@ def test_planning_failure_falls_back_without_crashing():
     ), kinds
 
 
+def test_leg_margin_is_wide_until_the_scans_measure_the_leg():
+    """``leg_margin``: the first plans keep footholds about ``3 x 0.15 m x 3.5 %`` further
+    from edges (the localiser's prior on the leg length), later ones only what the scans leave
+    uncertain; 0 keeps the configured margin; out of range is an error naming the option."""
+    env = gym.make("roughwalk/CompassGaitRough-v0", difficulty=1.0)
+    base = make_reference_policy(env).controller.planner.config.edge_margin
+    margins = {}
+    for z in (0.0, 3.0):
+        policy = make_reference_policy(env, leg_margin=z)
+        obs, _ = env.reset(seed=1_000_001)
+        policy.reset()
+        seen = []
+        for _ in range(1500):
+            obs, _, terminated, truncated, info = env.step(policy(obs))
+            k = len(policy.controller.records)
+            if k > len(seen):
+                seen.append(policy.controller.planner.config.edge_margin - base)
+            if terminated or truncated:
+                break
+        assert info["failure"] is None
+        margins[z] = np.array(seen)
+    assert np.all(margins[0.0] == 0.0)
+    wide = margins[3.0]
+    assert wide[0] == pytest.approx(0.015)  # 3 sd of 0.15 m x 3.5 %, in 2.5 mm steps
+    assert wide[10:].max() <= 0.005 + 1e-12
+    for bad in (-1.0, 11.0, float("nan")):
+        with pytest.raises(ValueError, match="leg_margin"):
+            make_reference_policy(env, leg_margin=bad)
+
+
 def test_bad_observations_and_modes_raise():
     env = gym.make("roughwalk/CompassGaitFlat-v0")
     policy = make_reference_policy(env)
