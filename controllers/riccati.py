@@ -118,42 +118,47 @@ def _quadratic(X, i0, im, i1, tau, out):
 
 
 @_jit
-def _substeps(Z, A, G, Qw, i0, im, i1, h, m):
-    """``m`` backward RK4 steps over one grid interval of length ``h`` (``Z`` in place)."""
+def _rk4_step(Z, A1, Am, A0, G1, Gm, G0, Q1, Qm, Q0, h, T, k1, k2, k3, k4, Zt):
+    """One backward RK4 step of length ``h`` (``Z`` in place) with the equation's samples at
+    the step's start ``A1, G1, Q1`` (its larger ``s``), middle and end; the rest is scratch."""
+    n = Z.shape[0]
+    _rhs(Z, A1, G1, Q1, T, k1)
+    for a in range(n):
+        for b in range(n):
+            Zt[a, b] = Z[a, b] + 0.5 * h * k1[a, b]
+    _rhs(Zt, Am, Gm, Qm, T, k2)
+    for a in range(n):
+        for b in range(n):
+            Zt[a, b] = Z[a, b] + 0.5 * h * k2[a, b]
+    _rhs(Zt, Am, Gm, Qm, T, k3)
+    for a in range(n):
+        for b in range(n):
+            Zt[a, b] = Z[a, b] + h * k3[a, b]
+    _rhs(Zt, A0, G0, Q0, T, k4)
+    for a in range(n):
+        for b in range(n):
+            Z[a, b] += (h / 6.0) * (k1[a, b] + 2.0 * k2[a, b] + 2.0 * k3[a, b] + k4[a, b])
+
+
+@_jit
+def _substeps(Z, A, G, Qw, i0, im, i1, h, m, T, k1, k2, k3, k4, Zt):
+    """``m`` backward RK4 steps over one grid interval of length ``h`` (``Z`` in place), the
+    equation interpolated quadratically through the interval's samples ``i0, im, i1``."""
     n = Z.shape[0]
     As = np.empty((3, n, n))
     Gs = np.empty((3, n, n))
     Qs = np.empty((3, n, n))
-    k1 = np.empty((n, n))
-    k2 = np.empty((n, n))
-    k3 = np.empty((n, n))
-    k4 = np.empty((n, n))
-    Zt = np.empty((n, n))
-    T = np.empty((n, n))
     dt = 1.0 / m
-    hs = h / m
     for r in range(m):
         tau = 1.0 - r * dt
         for p, t in enumerate((tau, tau - 0.5 * dt, tau - dt)):
             _quadratic(A, i0, im, i1, t, As[p])
             _quadratic(G, i0, im, i1, t, Gs[p])
             _quadratic(Qw, i0, im, i1, t, Qs[p])
-        _rhs(Z, As[0], Gs[0], Qs[0], T, k1)
-        for a in range(n):
-            for b in range(n):
-                Zt[a, b] = Z[a, b] + 0.5 * hs * k1[a, b]
-        _rhs(Zt, As[1], Gs[1], Qs[1], T, k2)
-        for a in range(n):
-            for b in range(n):
-                Zt[a, b] = Z[a, b] + 0.5 * hs * k2[a, b]
-        _rhs(Zt, As[1], Gs[1], Qs[1], T, k3)
-        for a in range(n):
-            for b in range(n):
-                Zt[a, b] = Z[a, b] + hs * k3[a, b]
-        _rhs(Zt, As[2], Gs[2], Qs[2], T, k4)
-        for a in range(n):
-            for b in range(n):
-                Z[a, b] += (hs / 6.0) * (k1[a, b] + 2.0 * k2[a, b] + 2.0 * k3[a, b] + k4[a, b])
+        _rk4_step(
+            Z, As[0], As[1], As[2], Gs[0], Gs[1], Gs[2], Qs[0], Qs[1], Qs[2], h / m,
+            T, k1, k2, k3, k4, Zt,
+        )  # fmt: skip
 
 
 @_jit
@@ -192,25 +197,13 @@ def _solve_segments(A, G, Qw, ds, nsteps, offs, F, Qj_inv, Znodes, node_offs):
             i0 = o + 2 * k
             rate = _rate_bound(Z, A, G, Qw, i0, im, i1)
             if h * rate > STIFF_TRIGGER:
-                _substeps(Z, A, G, Qw, i0, im, i1, h, int(math.ceil(h * rate / STIFF_STEP)))
-                Znodes[no + k] = Z
-                continue
-            _rhs(Z, A[i1], G[i1], Qw[i1], T, k1)
-            for a in range(n):
-                for b in range(n):
-                    Zt[a, b] = Z[a, b] + 0.5 * h * k1[a, b]
-            _rhs(Zt, A[im], G[im], Qw[im], T, k2)
-            for a in range(n):
-                for b in range(n):
-                    Zt[a, b] = Z[a, b] + 0.5 * h * k2[a, b]
-            _rhs(Zt, A[im], G[im], Qw[im], T, k3)
-            for a in range(n):
-                for b in range(n):
-                    Zt[a, b] = Z[a, b] + h * k3[a, b]
-            _rhs(Zt, A[i0], G[i0], Qw[i0], T, k4)
-            for a in range(n):
-                for b in range(n):
-                    Z[a, b] += (h / 6.0) * (k1[a, b] + 2.0 * k2[a, b] + 2.0 * k3[a, b] + k4[a, b])
+                m = int(math.ceil(h * rate / STIFF_STEP))
+                _substeps(Z, A, G, Qw, i0, im, i1, h, m, T, k1, k2, k3, k4, Zt)
+            else:
+                _rk4_step(
+                    Z, A[i1], A[im], A[i0], G[i1], G[im], G[i0], Qw[i1], Qw[im], Qw[i0], h,
+                    T, k1, k2, k3, k4, Zt,
+                )  # fmt: skip
             Znodes[no + k] = Z
     return Z
 
