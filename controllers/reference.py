@@ -135,12 +135,17 @@ class ReferencePolicy:
         if identify < 0:
             raise ValueError(f"identify = {identify!r}; allowed: an integer >= 0 (footsteps)")
         self.identify = int(identify)
-        leg_margin = float(leg_margin)
+        allowed = f"allowed: a number in [0, {MAX_LEG_MARGIN}] (standard deviations)"
+        if isinstance(leg_margin, bool) or not isinstance(leg_margin, (int, float, np.number)):
+            raise ValueError(f"leg_margin = {leg_margin!r}; {allowed}")
         if not (math.isfinite(leg_margin) and 0 <= leg_margin <= MAX_LEG_MARGIN):
+            raise ValueError(f"leg_margin = {leg_margin!r}; {allowed}")
+        if leg_margin and est.localiser is None:
             raise ValueError(
-                f"leg_margin = {leg_margin!r}; allowed: [0, {MAX_LEG_MARGIN}] standard deviations"
+                "leg_margin: needs the terrain-scan localisation (localise on, a scanner), which "
+                "measures the leg length"
             )
-        self.leg_margin = leg_margin
+        self.leg_margin = float(leg_margin)
         self.identifier: SwingIdentifier | None = None
         if self.identify:
             self.identifier = SwingIdentifier(self.robot, est.dt, est.angle_sigma)

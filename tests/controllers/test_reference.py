@@ -143,9 +143,11 @@ def test_leg_margin_is_wide_until_the_scans_measure_the_leg():
     wide = margins[3.0]
     assert wide[0] == pytest.approx(0.015)  # 3 sd of 0.15 m x 3.5 %, in 2.5 mm steps
     assert wide[10:].max() <= 0.005 + 1e-12
-    for bad in (-1.0, 11.0, float("nan")):
-        with pytest.raises(ValueError, match="leg_margin"):
+    for bad in (-1.0, 11.0, float("nan"), "wide", True):
+        with pytest.raises(ValueError, match="leg_margin = .*; allowed: a number in"):
             make_reference_policy(env, leg_margin=bad)
+    with pytest.raises(ValueError, match="leg_margin: needs the terrain-scan localisation"):
+        make_reference_policy(env, leg_margin=3.0, localise=False)
 
 
 def test_bad_observations_and_modes_raise():
