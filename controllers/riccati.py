@@ -94,13 +94,26 @@ def _frobenius(M):
 
 
 @_jit
-def _rate_bound(Z, A, G, Qw, i0, im, i1):
+def _rate_terms(A, G, Qw):
+    """Per sample, the parts of the rate bound that do not depend on ``Z`` (module
+    docstring): ``2 |A|``, ``sqrt(|G| |wQ|)`` and ``|wQ|``."""
+    N = A.shape[0]
+    out = np.empty((N, 3))
+    for i in range(N):
+        nq = _frobenius(Qw[i])
+        out[i, 0] = 2.0 * _frobenius(A[i])
+        out[i, 1] = math.sqrt(_frobenius(G[i]) * nq)
+        out[i, 2] = nq
+    return out
+
+
+@_jit
+def _rate_bound(Z, terms, i0, im, i1):
     """Bound ``L`` on the rate of the equation over one grid interval (module docstring)."""
     nz = _frobenius(Z)
     out = 0.0
     for i in (i0, im, i1):
-        nq = _frobenius(Qw[i])
-        r = 2.0 * _frobenius(A[i]) + 2.0 * max(math.sqrt(_frobenius(G[i]) * nq), nq * nz)
+        r = terms[i, 0] + 2.0 * max(terms[i, 1], terms[i, 2] * nz)
         if r > out:
             out = r
     return out
@@ -173,6 +186,7 @@ def _solve_segments(A, G, Qw, ds, nsteps, offs, F, Qj_inv, Znodes, node_offs):
     k4 = np.empty((n, n))
     Zt = np.empty((n, n))
     T = np.empty((n, n))
+    terms = _rate_terms(A, G, Qw)
     for j in range(S - 1, -1, -1):
         if j < S - 1:
             # jump from the start of segment j+1 back to the end of segment j (Woodbury)
@@ -195,7 +209,7 @@ def _solve_segments(A, G, Qw, ds, nsteps, offs, F, Qj_inv, Znodes, node_offs):
             i1 = o + 2 * k + 2
             im = o + 2 * k + 1
             i0 = o + 2 * k
-            rate = _rate_bound(Z, A, G, Qw, i0, im, i1)
+            rate = _rate_bound(Z, terms, i0, im, i1)
             if h * rate > STIFF_TRIGGER:
                 m = int(math.ceil(h * rate / STIFF_STEP))
                 _substeps(Z, A, G, Qw, i0, im, i1, h, m, T, k1, k2, k3, k4, Zt)
