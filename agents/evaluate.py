@@ -503,7 +503,11 @@ def make_eval_env(
     except ValueError:
         env.close()
         raise
-    policy = make_baseline_policy(policy_spec, env, config=config, **options)
+    try:
+        policy = make_baseline_policy(policy_spec, env, config=config, **options)
+    except ValueError:
+        env.close()
+        raise
     return env, policy, env_id, env_kwargs
 
 

@@ -262,6 +262,11 @@ def test_planner_controller_and_observer_options_reach_the_reference_policy():
         ("reference", {"leg_margin": -0.5}, r"leg_margin = -0.5; allowed: a number in \[0, 10"),
         ("reference", {"leg_margin": "wide"}, r"leg_margin = 'wide'; allowed"),
         ("passive", {"leg_margin": 1.0}, r"leg_margin: applies to the pd and reference"),
+        (
+            "reference",
+            {"leg_margin": 1.0, "perception": "known-map"},
+            r"leg_margin: needs the terrain-scan localisation",
+        ),
     ],
 )
 def test_bad_controller_options_are_clear_errors(policy, options, match):
