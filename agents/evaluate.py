@@ -47,7 +47,6 @@ from agents.runs import atomic_write_stream, find_vecnormalize, load_vecnormaliz
 from agents.trained import TrainedPolicy, load_policy
 from controllers.controller import ControllerConfig, PDController, TransverseController
 from controllers.planner import PlannerConfig
-from controllers.reference import MAX_LEG_MARGIN
 from envs.config_util import real_setting
 
 #: the baselines that take a controller mode (``--controller-mode``)
@@ -454,14 +453,8 @@ def make_eval_env(
         if isinstance(identify, bool) or not isinstance(identify, int) or identify < 0:
             raise ValueError(f"identify = {identify!r}; allowed: an integer >= 0 (footsteps)")
         options["identify"] = identify
-    if leg_margin is not None:
-        margin = real_setting("leg_margin", leg_margin, f"a number in [0, {MAX_LEG_MARGIN}]")
-        if not 0 <= margin <= MAX_LEG_MARGIN:
-            raise ValueError(
-                f"leg_margin = {leg_margin!r}; allowed: a number in [0, {MAX_LEG_MARGIN}] "
-                "(standard deviations)"
-            )
-        options["leg_margin"] = margin
+    if leg_margin is not None:  # checked by the policy (the env is closed if it refuses)
+        options["leg_margin"] = leg_margin
     trained = None
     if policy_spec not in BASELINES:
         trained = load_trained(policy_spec, vecnormalize=vecnormalize, algo=algo)

@@ -154,13 +154,10 @@ def _rk4_step(Z, A1, Am, A0, G1, Gm, G0, Q1, Qm, Q0, h, T, k1, k2, k3, k4, Zt):
 
 
 @_jit
-def _substeps(Z, A, G, Qw, i0, im, i1, h, m, T, k1, k2, k3, k4, Zt):
+def _substeps(Z, A, G, Qw, i0, im, i1, h, m, T, k1, k2, k3, k4, Zt, As, Gs, Qs):
     """``m`` backward RK4 steps over one grid interval of length ``h`` (``Z`` in place), the
-    equation interpolated quadratically through the interval's samples ``i0, im, i1``."""
-    n = Z.shape[0]
-    As = np.empty((3, n, n))
-    Gs = np.empty((3, n, n))
-    Qs = np.empty((3, n, n))
+    equation interpolated quadratically through the interval's samples ``i0, im, i1`` into
+    the scratch ``As, Gs, Qs`` (``(3, n, n)`` each)."""
     dt = 1.0 / m
     for r in range(m):
         tau = 1.0 - r * dt
@@ -186,6 +183,9 @@ def _solve_segments(A, G, Qw, ds, nsteps, offs, F, Qj_inv, Znodes, node_offs):
     k4 = np.empty((n, n))
     Zt = np.empty((n, n))
     T = np.empty((n, n))
+    As = np.empty((3, n, n))  # the substeps' interpolated samples
+    Gs = np.empty((3, n, n))
+    Qs = np.empty((3, n, n))
     terms = _rate_terms(A, G, Qw)
     for j in range(S - 1, -1, -1):
         if j < S - 1:
@@ -212,7 +212,7 @@ def _solve_segments(A, G, Qw, ds, nsteps, offs, F, Qj_inv, Znodes, node_offs):
             rate = _rate_bound(Z, terms, i0, im, i1)
             if h * rate > STIFF_TRIGGER:
                 m = int(math.ceil(h * rate / STIFF_STEP))
-                _substeps(Z, A, G, Qw, i0, im, i1, h, m, T, k1, k2, k3, k4, Zt)
+                _substeps(Z, A, G, Qw, i0, im, i1, h, m, T, k1, k2, k3, k4, Zt, As, Gs, Qs)
             else:
                 _rk4_step(
                     Z, A[i1], A[im], A[i0], G[i1], G[im], G[i0], Qw[i1], Qw[im], Qw[i0], h,
