@@ -172,6 +172,12 @@ class ControllerConfig:
             step's ``fallback`` is a relaxation, ``"relaxed: ..."``, or ``"least violation"``):
             ``"pd"`` (default), PD on ``y`` with :data:`FALLBACK_PD`, no feedback on the speed
             along the motion; ``"riccati"``, the transverse feedback as for every other plan.
+        friction_limit: friction coefficient (dimensionless) of a friction-cone clip on the
+            input: at every tick ``u`` is also clipped to the inputs under which the nominal
+            model's ground reaction on the stance foot, at the estimated state, stays inside
+            ``|f_t| <= friction_limit f_n`` (no clip where no input does); 0 (default) clips to
+            ``u_max`` only. Stiff feedback weights otherwise ask for hip torques that make the
+            stance foot slip. >= 0.
     """
 
     horizon: int = 3
@@ -192,6 +198,7 @@ class ControllerConfig:
     tube_replans: int = 1
     tube_fallbacks: tuple = TUBE_FALLBACKS
     relaxed_feedback: str = "pd"
+    friction_limit: float = 0.0
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "fallbacks", fallback_items(self.fallbacks))
@@ -227,7 +234,7 @@ class ControllerConfig:
         margin = real_setting("ControllerConfig.margin", self.margin, "[0, 0.5]")
         if not (0.0 <= margin <= 0.5):
             raise ValueError(f"ControllerConfig.margin = {self.margin!r}; allowed: [0, 0.5]")
-        for name in ("tube_energy", "tube_y", "tube_phase"):
+        for name in ("tube_energy", "tube_y", "tube_phase", "friction_limit"):
             v = real_setting(f"ControllerConfig.{name}", getattr(self, name), ">= 0")
             hi = 1.0 if name == "tube_phase" else math.inf
             if not (0.0 <= v <= hi):
@@ -658,8 +665,15 @@ class TransverseController:
         return horizon_gains(models, self.config)
 
     def _load(self, sol: HorizonSolution) -> None:
+        limit = self.config.friction_limit
+        slope = self.terrain.slope_at(self._stance[0]) if limit > 0 else 0.0
         table = GainTable.from_solution(
-            sol, self.robot.u_max, self.config.late_blend, 4 * self.config.grid
+            sol,
+            self.robot.u_max,
+            self.config.late_blend,
+            4 * self.config.grid,
+            limit,
+            slope,
         )
         self.gain_table = table
         self._law_args = table.kernel_args()

@@ -10,7 +10,9 @@ with the phase ``theta = q2``,
   interpolated (cubic Hermite) on a uniform phase grid;
 * the feedback ``v = K(theta) x_perp`` with the gains interpolated linearly on their grid;
 * the input ``u = (v - R) / N`` that gives ``y_ddot = v`` (``y_ddot = N u + R`` with the hip
-  friction in ``R``, so it is compensated), clipped to the actuator limit.
+  friction in ``R``, so it is compensated), clipped to the actuator limit and, where asked
+  (``ControllerConfig.friction_limit``), to the inputs that keep the stance foot's ground
+  reaction inside its friction cone (the reaction is affine in ``u``).
 
 The tick is one compiled function, :func:`feedback_law`; the step it reads comes from a
 :class:`controllers.gains.GainTable` as ``feedback_law(P, x, *table.kernel_args())``.
@@ -21,15 +23,17 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
+from envs.physics import model
+
 from .reduced import output_acceleration
 
-__all__ = ["constraint_at", "feedback_law", "pack_scalars", "thetadot_sq_at"]
+__all__ = ["constraint_at", "feedback_law", "friction_clip", "pack_scalars", "thetadot_sq_at"]
 
 _jit = njit(cache=True, error_model="numpy")
 
 # layout of the scalar vector of the compiled tick (GainTable.scalars), written by pack_scalars
-T_TP, T_SPAN, T_F0, T_FD, T_K0, T_KD, T_UMAX, T_LATE = range(8)
-N_T = 8
+T_TP, T_SPAN, T_F0, T_FD, T_K0, T_KD, T_UMAX, T_LATE, T_MU, T_NX, T_NY = range(11)
+N_T = 11
 
 
 def pack_scalars(
@@ -41,15 +45,21 @@ def pack_scalars(
     gain_step: float,
     u_max: float,
     late_blend: float,
+    friction_limit: float = 0.0,
+    stance_slope: float = 0.0,
 ) -> np.ndarray:
     """The scalar vector of the compiled tick (fields as in :class:`controllers.gains.GainTable`:
-    phases and spacings [rad], ``u_max`` [input units], ``late_blend`` [rad])."""
+    phases and spacings [rad], ``u_max`` [input units], ``late_blend`` [rad], the friction
+    coefficient of the input's friction-cone clip (0: off) and the ground slope ``dh/dx`` under
+    the stance foot)."""
     tab = np.zeros(N_T)
     tab[T_TP], tab[T_SPAN] = theta_plus, span
     tab[T_F0], tab[T_FD] = speed_theta0, speed_step
     tab[T_K0], tab[T_KD] = gain_theta0, gain_step
     tab[T_UMAX] = u_max
     tab[T_LATE] = late_blend
+    tab[T_MU] = friction_limit
+    tab[T_NX], tab[T_NY] = model.ground_normal(float(stance_slope))
     return tab
 
 
@@ -158,6 +168,8 @@ def feedback_law(P, x, tab, pc, thetadot_sq, dthetadot_sq, K):
     nn = output_acceleration(P, q1, q2, q1d, q2d, 1.0, dph, ddph) - r0
     u = (v - r0) / nn
     umax = tab[T_UMAX]
+    if tab[T_MU] > 0.0:
+        u = friction_clip(P, q1, q2, q1d, q2d, u, tab[T_MU], tab[T_NX], tab[T_NY], umax)
     if u > umax:
         u = umax
     elif u < -umax:
@@ -165,3 +177,32 @@ def feedback_law(P, x, tab, pc, thetadot_sq, dthetadot_sq, K):
     if not (u == u):
         u = 0.0
     return u, I, y, yd, v
+
+
+@_jit
+def friction_clip(P, q1, q2, q1d, q2d, u, mu, nx, ny, umax):
+    """``u`` [input units] clipped to the inputs in ``[-umax, umax]`` under which the stance
+    foot's ground reaction at the state ``(q1, q2, q1d, q2d)`` [rad, rad/s] stays inside the
+    friction cone ``|f_t| <= mu f_n`` of the ground with unit normal ``(nx, ny)``; ``u``
+    unchanged where no input does (the state slips or lifts off whatever the motor does).
+
+    The accelerations are affine in ``u``, and so is the reaction (Newton's law on the robot),
+    so each side of the cone bounds ``u`` on one side."""
+    a1, a2 = model.accelerations(P, q1, q2, q1d, q2d, 0.0)
+    b1, b2 = model.accelerations(P, q1, q2, q1d, q2d, 1.0)
+    fn0, ft0 = model.stance_reaction(P, q1, q2, q1d, q2d, a1, a2, nx, ny)
+    fn1, ft1 = model.stance_reaction(P, q1, q2, q1d, q2d, b1, b2, nx, ny)
+    lo, hi = -umax, umax
+    for sgn in (1.0, -1.0):
+        # mu f_n(u) - sgn f_t(u) >= 0, affine: c0 + c1 u >= 0
+        c0 = mu * fn0 - sgn * ft0
+        c1 = mu * (fn1 - fn0) - sgn * (ft1 - ft0)
+        if c1 > 0.0:
+            lo = max(lo, -c0 / c1)
+        elif c1 < 0.0:
+            hi = min(hi, -c0 / c1)
+        elif c0 < 0.0:
+            return u
+    if lo > hi:
+        return u
+    return min(max(u, lo), hi)

@@ -89,6 +89,9 @@ class GainTable:
         u_max: actuator limit [input units].
         late_blend: phase over which ``phi'`` is blended to 0 past a late touchdown [rad]
             (0: the polynomial is extrapolated).
+        friction_limit: friction coefficient of the input's friction-cone clip
+            (``ControllerConfig.friction_limit``; 0: off).
+        stance_slope: ground slope ``dh/dx`` under the stance foot (dimensionless).
         scalars: the scalar fields packed for the compiled tick (derived, not an argument).
     """
 
@@ -104,6 +107,8 @@ class GainTable:
     gains: np.ndarray = field(repr=False)
     u_max: float
     late_blend: float
+    friction_limit: float = 0.0
+    stance_slope: float = 0.0
     scalars: np.ndarray = field(init=False, repr=False, compare=False)
 
     def __post_init__(self) -> None:
@@ -116,12 +121,20 @@ class GainTable:
             self.gain_step,
             self.u_max,
             self.late_blend,
+            self.friction_limit,
+            self.stance_slope,
         )
         object.__setattr__(self, "scalars", packed)
 
     @classmethod
     def from_solution(
-        cls, solution: HorizonSolution, u_max: float, late_blend: float, speed_intervals: int
+        cls,
+        solution: HorizonSolution,
+        u_max: float,
+        late_blend: float,
+        speed_intervals: int,
+        friction_limit: float = 0.0,
+        stance_slope: float = 0.0,
     ) -> GainTable:
         """The table of the solution's current step.
 
@@ -130,6 +143,8 @@ class GainTable:
             u_max: actuator limit [input units].
             late_blend: see :attr:`late_blend` [rad].
             speed_intervals: intervals of the speed grid over the step and its margins.
+            friction_limit: see :attr:`friction_limit` (0: off).
+            stance_slope: see :attr:`stance_slope`.
         """
         m0 = solution.steps[0]
         c = m0.constraint
@@ -149,6 +164,8 @@ class GainTable:
             gains=np.ascontiguousarray(solution.K),
             u_max=u_max,
             late_blend=late_blend,
+            friction_limit=friction_limit,
+            stance_slope=stance_slope,
         )
 
     def kernel_args(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:

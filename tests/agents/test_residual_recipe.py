@@ -50,7 +50,8 @@ def test_zero_init_starts_exactly_at_the_reference_controller(name, smoke, tmp_p
         kwargs = cfg.env_kwargs
         agent_env = cfg.wrap(gym.make(cfg.env_id, **kwargs))
         plain = gym.make(cfg.env_id, **kwargs)
-        reference = controllers.make_reference_policy(plain)
+        [base] = [kw for cls, kw in cfg.wrapper_specs() if cls.__name__ == "ResidualWrapper"]
+        reference = controllers.make_reference_policy(plain, **(base.get("base_kwargs") or {}))
         obs, _ = agent_env.reset(seed=21)
         ref_obs, _ = plain.reset(seed=21)
         reference.reset()

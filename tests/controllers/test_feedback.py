@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from controllers.controller import ControllerConfig, TransverseController
-from controllers.feedback import constraint_at, feedback_law, thetadot_sq_at
+from controllers.feedback import constraint_at, feedback_law, friction_clip, thetadot_sq_at
 from controllers.reduced import pfl_terms
 from envs.physics import model
 
@@ -62,3 +62,47 @@ def test_late_touchdown_blends_the_slope_to_zero(loaded):
     ph, dph, ddph = constraint_at(tab, pc, end + 2 * g.late_blend)
     assert dph == 0.0 and ddph == 0.0
     assert ph == pytest.approx(ph0 + 0.5 * dph0 * g.late_blend, rel=1e-12)
+
+
+def test_friction_clip_keeps_the_stance_reaction_in_the_cone(loaded, state_from_z):
+    """``ControllerConfig.friction_limit``: the input is clipped to the nearest one whose
+    stance-foot reaction lies in the friction cone; an input inside it is left alone."""
+    ctrl = loaded
+    P, umax = ctrl.P, ctrl.robot.u_max
+    st = ctrl.solution.steps[0]
+    x = state_from_z(st, 0.5 * (st.theta_plus + st.theta_minus), np.array([0.0, 0.004, 0.05]))
+    mu = 0.2  # the full input needs about 0.25 at mid-stance: the cone binds on both sides
+
+    def margin(u, slope=0.0):
+        nx, ny = model.ground_normal(slope)
+        a1, a2 = model.accelerations(P, *x, u)
+        fn, ft = model.stance_reaction(P, *x, a1, a2, nx, ny)
+        return model.friction_cone_margin(fn, ft, mu)
+
+    us = np.linspace(-umax, umax, 301)
+    inside = np.array([margin(u) >= 0 for u in us])
+    assert inside.any() and not inside[0] and not inside[-1]
+    lo, hi = us[inside].min(), us[inside].max()
+    for slope in (0.0, 0.05):
+        nx, ny = model.ground_normal(slope)
+        for u in us:
+            c = friction_clip(P, *x, u, mu, nx, ny, umax)
+            assert margin(c, slope) >= -1e-9
+            if margin(u, slope) >= 0:
+                assert c == u
+    for u in (-umax, umax):  # the nearest admissible input: the cone's edge
+        c = friction_clip(P, *x, u, mu, *model.ground_normal(0.0), umax)
+        assert margin(c) == pytest.approx(0.0, abs=1e-9)
+        assert lo - 0.2 < c < lo + 1e-9 if u < 0 else hi - 1e-9 < c < hi + 0.2
+    # through the tick: a huge gain stops at the cone's edge instead of the actuator limit
+    table = dataclasses.replace(
+        ctrl.gain_table, gains=1e6 * ctrl.gain_table.gains, friction_limit=mu
+    )
+    u = feedback_law(P, x, *table.kernel_args())[0]
+    assert abs(u) < umax and margin(u) == pytest.approx(0.0, abs=1e-9)
+    # off (0) by default: the tick clips to the actuator limit only
+    assert ctrl.gain_table.friction_limit == 0.0
+    with pytest.raises(ValueError, match="friction_limit"):
+        ControllerConfig(friction_limit=-0.1)
+    with pytest.raises(ValueError, match="friction_limit"):
+        ControllerConfig(friction_limit=float("inf"))
