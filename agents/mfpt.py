@@ -44,6 +44,7 @@ import numpy as np
 from scipy import stats
 
 import envs  # noqa: F401  (registers the ids)
+from controllers.controller import ControllerConfig
 from envs.physics.terrain import MAX_COURSE_LENGTH, terrain_spec
 
 from .policies import BASELINES, make_baseline_policy
@@ -517,6 +518,20 @@ def check_run_args(
         raise ValueError(f"max_step_time = {max_step_time!r} out of range; allowed: (0, 60] s")
 
 
+def policy_options(policy: str, controller: dict[str, Any] | None) -> dict[str, Any]:
+    """Keyword arguments of :func:`agents.policies.make_baseline_policy` for ``policy`` with the
+    controller settings ``controller`` (:class:`controllers.ControllerConfig` fields; None or
+    empty: none). Raises ``ValueError`` naming a bad field, or settings for ``passive``."""
+    if not controller:
+        return {}
+    if policy == "passive":
+        raise ValueError("controller: applies to the pd and reference policies, not to passive")
+    try:
+        return {"config": ControllerConfig.from_dict(dict(controller))}
+    except (TypeError, ValueError) as exc:
+        raise ValueError(f"controller: {exc}") from None
+
+
 def run_walks(
     policy: str,
     roughness: float,
@@ -528,6 +543,7 @@ def run_walks(
     env_id: str = DEFAULT_ENV,
     max_step_time: float = 4.0,
     on_walk: Callable[[Walk], None] | None = None,
+    controller: dict[str, Any] | None = None,
 ) -> list[Walk]:
     """Walk ``policy`` on courses of random blocks of ``roughness`` until each walk fails or
     is censored, ``walkers`` walks at a time on one native vector env.
@@ -549,11 +565,14 @@ def run_walks(
         max_step_time: time limit per capped footstep [s]; a walk is censored (``time``)
             after ``step_cap * max_step_time`` simulated seconds.
         on_walk: called with each finished walk (progress).
+        controller: :class:`controllers.ControllerConfig` fields of the ``pd`` and
+            ``reference`` policies (None: their defaults).
 
     Returns:
         The walks in walk order.
     """
     check_run_args(policy, walks, walkers, step_cap, seed, max_step_time)
+    policy_kwargs = policy_options(policy, controller)
     r = _nonneg("roughness", roughness, 1.0)
     probe = gym.make(env_id)
     robot, dt = probe.unwrapped.robot, float(probe.unwrapped.dt)
@@ -574,7 +593,7 @@ def run_walks(
     )
     try:
         base = venv.unwrapped
-        pols = [make_baseline_policy(policy, _SubEnv(base, i)) for i in range(n)]
+        pols = [make_baseline_policy(policy, _SubEnv(base, i), **policy_kwargs) for i in range(n)]
         slot_walk = list(range(n))
         obs, info = venv.reset(seed=[seed + j for j in range(n)])
         for p in pols:

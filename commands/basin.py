@@ -42,6 +42,7 @@ from commands.cli import (
     announce_compilation,
     float_range,
     int_range,
+    key_value,
     output_dir,
 )
 from commands.mfpt import save_figure
@@ -58,6 +59,7 @@ from controllers.basin import (
     sample_basin,
     slice_grid,
 )
+from controllers.controller import ControllerConfig
 
 OUTPUTS = (
     "basin.json",
@@ -105,6 +107,14 @@ def configure(parser: argparse.ArgumentParser) -> None:
         "--slice-radius",
         type=float_range(0, 100, lo_open=True),
         help="half-extent of the slices as a radius r (default: 1.5 x the largest of --radii)",
+    )
+    parser.add_argument(
+        "--controller",
+        nargs="+",
+        type=key_value,
+        metavar="KEY=VALUE",
+        help="the controller's settings (ControllerConfig fields, e.g. Q=[1,1,1] for the "
+        "paper's weights); they set P, so V and the radii too",
     )
     parser.add_argument(
         "--seed", type=int_range(0, 2**32 - 1), default=0, help="seed of the directions"
@@ -208,16 +218,28 @@ def run(args: argparse.Namespace) -> int:
     radii = list(args.radii)
     if any(b <= a for a, b in zip(radii, radii[1:])):
         raise ValueError(f"--radii: sizes must increase, got {radii}")
+    config = controller_config(args.controller)
     out: Path = args.out
     with claim_output_folder(out, OUTPUTS, args.overwrite):
-        return _measure(args, out, radii)
+        return _measure(args, out, radii, config)
 
 
-def _measure(args: argparse.Namespace, out: Path, radii: list[float]) -> int:
+def controller_config(pairs: list[tuple[str, Any]] | None) -> ControllerConfig:
+    """The controller's settings from ``--controller KEY=VALUE`` pairs (None: the defaults);
+    a bad field or value raises ``ValueError`` naming it."""
+    try:
+        return ControllerConfig.from_dict(dict(pairs or ()))
+    except (TypeError, ValueError) as exc:
+        raise ValueError(f"--controller: {exc}") from None
+
+
+def _measure(
+    args: argparse.Namespace, out: Path, radii: list[float], config: ControllerConfig
+) -> int:
     """``roughwalk basin``'s measurement and outputs, in the folder ``out`` it holds."""
     announce_compilation(SIMULATOR_KERNELS + CONTROLLER_KERNELS)
     t0 = time.perf_counter()
-    ref = periodic_reference(args.robot)
+    ref = periodic_reference(args.robot, config)
     samples = sample_basin(ref, radii, args.per_radius, args.seed, args.steps, args.v_tol)
     t_shells = time.perf_counter() - t0
     rows = converged_fractions(samples)
@@ -283,6 +305,7 @@ def _measure(args: argparse.Namespace, out: Path, radii: list[float]) -> int:
         "confidence": args.confidence,
         "slices": args.slices,
         "slice_radius": slice_r,
+        "controller": dict(args.controller or ()),
         "simulation": "exact hybrid simulator, reference controller on the true state",
     }
     data = {

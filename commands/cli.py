@@ -164,6 +164,20 @@ def float_range(
     return _number(float, lo, hi, lo_open, hi_open)
 
 
+def key_value(text: str) -> tuple[str, Any]:
+    """An argparse ``type=``: one ``KEY=VALUE`` setting (the value read as YAML)."""
+    from agents.config import parse_assignments
+
+    try:
+        ((key, value),) = parse_assignments([text]).items()
+    except Exception as exc:  # ConfigError, or YAML's error on a malformed value
+        problem = getattr(exc, "problem", None) or " ".join(str(exc).split())
+        raise argparse.ArgumentTypeError(
+            f"{text!r} is not KEY=VALUE with a YAML value ({problem})"
+        ) from None
+    return key, value
+
+
 def env_id(text: str) -> str:
     """An argparse ``type=``: a registered roughwalk env id (``roughwalk/...``)."""
     import gymnasium as gym

@@ -39,7 +39,7 @@ from rich.console import Console
 from rich.markup import escape
 from rich.table import Table
 
-from agents.config import TEST_SEED, parse_assignments
+from agents.config import TEST_SEED
 from agents.evaluate import (
     CONTROLLED_BASELINES,
     PERCEPTION_MODES,
@@ -61,6 +61,7 @@ from commands.cli import (
     env_id,
     float_range,
     int_range,
+    key_value,
     output_file,
 )
 from controllers.controller import MODES
@@ -179,18 +180,6 @@ def certificate_line(ev: Evaluation) -> str | None:
     )
 
 
-def _env_kwarg(text: str) -> tuple[str, Any]:
-    """An argparse ``type=``: one ``KEY=VALUE`` env keyword argument (the value as YAML)."""
-    try:
-        ((key, value),) = parse_assignments([text]).items()
-    except Exception as exc:  # ConfigError, or YAML's error on a malformed value
-        problem = getattr(exc, "problem", None) or " ".join(str(exc).split())
-        raise argparse.ArgumentTypeError(
-            f"{text!r} is not KEY=VALUE with a YAML value ({problem})"
-        ) from None
-    return key, value
-
-
 def _algo(text: str) -> str:
     """An argparse ``type=``: an algorithm name."""
     if text.lower() not in ALGOS:
@@ -213,7 +202,7 @@ def configure(parser: argparse.ArgumentParser) -> None:
     parser.add_argument(
         "--env-kwargs",
         nargs="*",
-        type=_env_kwarg,
+        type=key_value,
         metavar="KEY=VALUE",
         help="env keyword arguments, values in YAML (default for a trained model: its own)",
     )
@@ -259,7 +248,7 @@ def configure(parser: argparse.ArgumentParser) -> None:
     parser.add_argument(
         "--planner",
         nargs="+",
-        type=_env_kwarg,
+        type=key_value,
         metavar="KEY=VALUE",
         help=f"the {' and '.join(CONTROLLED_BASELINES)} policies' gait-planner settings "
         "(PlannerConfig fields over the robot's preset, e.g. end_thetadot_floor=0)",
@@ -267,7 +256,7 @@ def configure(parser: argparse.ArgumentParser) -> None:
     parser.add_argument(
         "--controller",
         nargs="+",
-        type=_env_kwarg,
+        type=key_value,
         metavar="KEY=VALUE",
         help=f"the {' and '.join(CONTROLLED_BASELINES)} policies' controller settings "
         "(ControllerConfig fields, e.g. tube_replans=0)",

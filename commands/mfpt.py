@@ -41,6 +41,7 @@ from agents.mfpt import (
     check_run_args,
     kaplan_meier,
     mfpt_sweep,
+    policy_options,
 )
 from agents.policies import BASELINES
 from agents.runs import atomic_write, atomic_write_stream, claim_output_folder
@@ -52,6 +53,7 @@ from commands.cli import (
     env_id,
     float_range,
     int_range,
+    key_value,
     output_dir,
 )
 
@@ -117,6 +119,14 @@ def configure(parser: argparse.ArgumentParser) -> None:
         type=float_range(0, lo_open=True),
         default=10.0,
         help="stop a policy's sweep after the first level with MFPT below this [footsteps]",
+    )
+    parser.add_argument(
+        "--controller",
+        nargs="+",
+        type=key_value,
+        metavar="KEY=VALUE",
+        help="the pd and reference policies' controller settings (ControllerConfig fields, "
+        "e.g. Q=[1,1,1] for the paper's weights)",
     )
     parser.add_argument(
         "--out", type=output_dir, default=Path("results/mfpt"), help="folder of the results"
@@ -269,6 +279,9 @@ def run(args: argparse.Namespace) -> int:
     check_run_args(
         policies[0], args.walks, args.walkers, args.step_cap, args.seed, args.max_step_time
     )
+    controller = dict(args.controller or ())
+    for policy in [p for p in policies if p != "passive"] or policies:
+        policy_options(policy, controller)  # a bad setting stops the command here
     out: Path = args.out
     with claim_output_folder(out, OUTPUTS, args.overwrite):
         return _measure(args, out, levels, policies)
@@ -276,6 +289,7 @@ def run(args: argparse.Namespace) -> int:
 
 def _measure(args: argparse.Namespace, out: Path, levels: list[float], policies: list[str]) -> int:
     """``roughwalk mfpt``'s walks and outputs, in the folder ``out`` it holds."""
+    controller = dict(args.controller or ())
     announce_compilation(
         SIMULATOR_KERNELS + (CONTROLLER_KERNELS if policies != ["passive"] else ())
     )
@@ -293,6 +307,7 @@ def _measure(args: argparse.Namespace, out: Path, levels: list[float], policies:
             seed=args.seed,
             env_id=args.env,
             max_step_time=args.max_step_time,
+            controller=controller if policy != "passive" else None,
         )
     leg = results[0].leg_length
     settings = {
@@ -303,6 +318,7 @@ def _measure(args: argparse.Namespace, out: Path, levels: list[float], policies:
         "seed": args.seed,
         "max_step_time": args.max_step_time,
         "confidence": args.confidence,
+        "controller": controller,
         "leg_length": leg,
         "mfpt": "1/p footsteps (the failing one counted); p = failures / footsteps attempted",
     }

@@ -98,7 +98,7 @@ def periodic_reference(
     robot: RobotParams | str = "paper", config: ControllerConfig | dict | None = None
 ) -> PeriodicReference:
     """The periodic gait of ``robot`` (a preset name or parameters) with the planner's defaults
-    and the Lyapunov matrices of the controller with ``config`` (default: the paper's)."""
+    and the Lyapunov matrices of the controller with ``config`` (default: its defaults)."""
     params = robot if isinstance(robot, RobotParams) else RobotParams.from_preset(robot)
     cfg = config if isinstance(config, ControllerConfig) else ControllerConfig.from_dict(config)
     planner = GaitPlanner(params)

@@ -14,6 +14,7 @@ from agents.mfpt import (
     geometric_check,
     kaplan_meier,
     markov_mfpt,
+    policy_options,
     roughness_terrain,
     run_walks,
 )
@@ -133,6 +134,22 @@ def test_pd_walks_are_censored_at_the_cap_and_reproducible():
         assert all(th < 0 < thd for th, thd in w.states[1:])
     b = run_walks("pd", 0.0, 2, walkers=1, step_cap=3, seed=0)
     assert a == b
+
+
+def test_controller_settings_reach_the_policies():
+    """``controller``: ControllerConfig fields of the pd and reference policies."""
+    assert policy_options("reference", None) == {}
+    (config,) = policy_options("reference", {"Q": [1, 1, 1], "R": 2}).values()
+    assert config.Q == (1.0, 1.0, 1.0) and config.R == 2.0
+    for policy, bad, match in (
+        ("passive", {"R": 2}, "not to passive"),
+        ("reference", {"R": -1}, "ControllerConfig.R"),
+        ("pd", {"gain": 1}, "gain"),
+    ):
+        with pytest.raises(ValueError, match=match):
+            policy_options(policy, bad)
+    walks = run_walks("reference", 0.0, 1, walkers=1, step_cap=2, controller={"R": 2})
+    assert walks[0].footsteps == 2 and not walks[0].failed
 
 
 @pytest.mark.parametrize(

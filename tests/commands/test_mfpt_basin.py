@@ -7,10 +7,13 @@ import csv
 import json
 from pathlib import Path
 
+import numpy as np
 import pytest
 
 from agents.runs import LOCK_FILE, claim_output_folder
 from commands.cli import main
+from controllers.basin import periodic_reference
+from controllers.controller import ControllerConfig
 
 
 def _error_line(capsys: pytest.CaptureFixture, command: str) -> str:
@@ -83,6 +86,9 @@ def test_a_folder_another_command_holds_is_refused(tmp_path: Path, capsys, comma
         (["--step-cap", "x"], "--step-cap"),
         (["--confidence", "1"], "--confidence"),
         (["--env", "roughwalk/Nope-v0"], "--env"),
+        (["--controller", "Q=[1,1]"], "ControllerConfig.Q"),
+        (["--controller", "gain=2"], "gain"),
+        (["--policy", "passive", "--controller", "Q=[1,1,1]"], "not to passive"),
     ],
 )
 def test_mfpt_bad_input_is_one_line_exit_2(tmp_path: Path, capsys, args, match):
@@ -90,6 +96,18 @@ def test_mfpt_bad_input_is_one_line_exit_2(tmp_path: Path, capsys, args, match):
     assert main(["mfpt", *args, "--out", str(out)]) == 2
     assert match in _error_line(capsys, "mfpt")
     assert not out.exists()
+
+
+def test_basin_metric_follows_the_controller_weights(tmp_path: Path):
+    """--controller sets the controller, hence its P: the basin's metric follows the weights."""
+    argv = ["basin", "--radii", "0.1", "--per-radius", "2", "--steps", "1", "--slices", "0"]
+    out = tmp_path / "b"
+    assert main([*argv, "--controller", "Q=[1,1,1]", "R=2", "--out", str(out)]) == 0
+    data = json.loads((out / "basin.json").read_text())
+    assert data["settings"]["controller"] == {"Q": [1, 1, 1], "R": 2}
+    config = ControllerConfig(Q=(1.0, 1.0, 1.0), R=2.0)
+    np.testing.assert_allclose(data["P"], periodic_reference("paper", config).P, rtol=1e-12)
+    assert not np.allclose(data["P"], periodic_reference("paper").P)
 
 
 def test_basin_writes_results(tmp_path: Path, capsys):
@@ -117,6 +135,9 @@ def test_basin_writes_results(tmp_path: Path, capsys):
         (["--steps", "-1"], "--steps"),
         (["--v-tol", "0"], "--v-tol"),
         (["--robot", "giant"], "--robot"),
+        (["--controller", "R=0"], "ControllerConfig.R"),
+        (["--controller", "gain=2"], "gain"),
+        (["--controller", "Q"], "--controller"),
     ],
 )
 def test_basin_bad_input_is_one_line_exit_2(tmp_path: Path, capsys, args, match):
