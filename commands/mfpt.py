@@ -284,12 +284,18 @@ def run(args: argparse.Namespace) -> int:
         policy_options(policy, controller)  # a bad setting stops the command here
     out: Path = args.out
     with claim_output_folder(out, OUTPUTS, args.overwrite):
-        return _measure(args, out, levels, policies)
+        return _measure(args, out, levels, policies, controller)
 
 
-def _measure(args: argparse.Namespace, out: Path, levels: list[float], policies: list[str]) -> int:
-    """``roughwalk mfpt``'s walks and outputs, in the folder ``out`` it holds."""
-    controller = dict(args.controller or ())
+def _measure(
+    args: argparse.Namespace,
+    out: Path,
+    levels: list[float],
+    policies: list[str],
+    controller: dict[str, Any],
+) -> int:
+    """``roughwalk mfpt``'s walks and outputs, in the folder ``out`` it holds (``controller``:
+    the pd and reference policies' ControllerConfig fields)."""
     announce_compilation(
         SIMULATOR_KERNELS + (CONTROLLER_KERNELS if policies != ["passive"] else ())
     )
