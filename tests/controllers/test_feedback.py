@@ -100,8 +100,9 @@ def test_friction_clip_keeps_the_stance_reaction_in_the_cone(loaded, state_from_
     )
     u = feedback_law(P, x, *table.kernel_args())[0]
     assert abs(u) < umax and margin(u) == pytest.approx(0.0, abs=1e-9)
-    # the controller passes its setting to the table; 0 clips to the actuator limit only
-    assert ctrl.gain_table.friction_limit == ctrl.config.friction_limit
+    # the controller passes its setting to the table (off, 0, by default); 0 clips to the
+    # actuator limit only
+    assert ctrl.gain_table.friction_limit == ctrl.config.friction_limit == 0.0
     off = dataclasses.replace(table, friction_limit=0.0)
     assert abs(feedback_law(P, x, *off.kernel_args())[0]) == umax
     with pytest.raises(ValueError, match="friction_limit"):
