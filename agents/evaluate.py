@@ -480,13 +480,16 @@ def make_eval_env(
     fields = dict(controller or {})
     try:
         if controller_mode is None:
-            config = ControllerConfig(**fields)
+            config = ControllerConfig.for_robot(env.unwrapped.robot.name, **fields)
         else:
             steps = env.spec.max_episode_steps if env.spec is not None else None
             if plan_steps is not None:
                 fields["plan_steps"] = plan_steps
             config = ControllerConfig.for_mode(
-                controller_mode, None if steps is None else steps * env.unwrapped.dt, **fields
+                controller_mode,
+                None if steps is None else steps * env.unwrapped.dt,
+                env.unwrapped.robot.name,
+                **fields,
             )
         if planner:
             options["planner"] = PlannerConfig.for_robot(env.unwrapped.robot.name, **planner)

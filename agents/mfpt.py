@@ -527,9 +527,10 @@ def policy_options(policy: str, controller: dict[str, Any] | None) -> dict[str, 
     if policy == "passive":
         raise ValueError("controller: applies to the pd and reference policies, not to passive")
     try:
-        return {"config": ControllerConfig.from_dict(dict(controller))}
+        ControllerConfig.from_dict(dict(controller))
     except (TypeError, ValueError) as exc:
         raise ValueError(f"controller: {exc}") from None
+    return {"config": dict(controller)}
 
 
 def run_walks(

@@ -23,7 +23,7 @@ from rich.table import Table
 
 from commands.cli import CONTROLLER_KERNELS, SIMULATOR_KERNELS, announce_compilation, int_range
 from configs import CONFIG_DIR
-from controllers.controller import ControllerConfig, TransverseController
+from controllers.controller import TransverseController
 from controllers.feedback import feedback_law
 from controllers.gains import horizon_gains, step_models
 from controllers.observer import HighGainObserver, observer_update
@@ -239,7 +239,7 @@ def controller_section(args: argparse.Namespace) -> list[Row]:
     planner's replanning call (flat, and per footstep of a state-feedback walk over the
     paper's stairs), and one control tick (observer update plus feedback law). Medians."""
     reps = 20 if args.quick else 200
-    ctrl = TransverseController("paper", "flat", ControllerConfig(horizon=3, replan=False))
+    ctrl = TransverseController("paper", "flat", {"horizon": 3, "replan": False})
     gait = ctrl.planner.periodic_gait()
     ctrl.reset(gait.q, gait.qd)
     steps = ctrl.plan.steps[:4]
@@ -257,7 +257,7 @@ def controller_section(args: argparse.Namespace) -> list[Row]:
         plan_t.append(time.perf_counter() - t0)
     # replanning at every footstep of a walk over the paper's stairs (state feedback)
     stairs = Terrain.from_yaml(CONFIG_DIR / "terrains" / "paper_stairs.yaml")
-    walker = TransverseController("paper", stairs, ControllerConfig(horizon=3))
+    walker = TransverseController("paper", stairs, {"horizon": 3})
     out = walker.rollout(gait.q, gait.qd, 8.0 if args.quick else 12.0, dt=0.005)
     stairs_plan = [r.plan_time for r in out["records"] if r.plan_time > 0][1:]
     obs = HighGainObserver(ctrl.robot, 0.005, 0.02)

@@ -151,7 +151,10 @@ def rollout(
     if plan_steps is not None and mode == "fixed-plan":
         fields["plan_steps"] = plan_steps
     config = ControllerConfig.for_mode(
-        mode, min(duration, episode_duration(env)) if math.isfinite(duration) else None, **fields
+        mode,
+        min(duration, episode_duration(env)) if math.isfinite(duration) else None,
+        env.unwrapped.robot.name,
+        **fields,
     )
     policy = make_reference_policy(env, config=config, record_history=True)
     obs, info = env.reset(seed=seed)

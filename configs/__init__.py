@@ -1,5 +1,5 @@
 """The project's YAML settings, shipped as package data: ``robots/``, ``terrains/``, ``envs/``,
-``planner/`` and ``agents/`` (rl-zoo3 format)."""
+``planner/``, ``controller/`` and ``agents/`` (rl-zoo3 format)."""
 
 from pathlib import Path
 

@@ -98,9 +98,13 @@ def periodic_reference(
     robot: RobotParams | str = "paper", config: ControllerConfig | dict | None = None
 ) -> PeriodicReference:
     """The periodic gait of ``robot`` (a preset name or parameters) with the planner's defaults
-    and the Lyapunov matrices of the controller with ``config`` (default: its defaults)."""
+    and the Lyapunov matrices of the controller with ``config`` (a :class:`ControllerConfig`, or
+    the fields that differ from the robot's defaults, :meth:`ControllerConfig.for_robot`)."""
     params = robot if isinstance(robot, RobotParams) else RobotParams.from_preset(robot)
-    cfg = config if isinstance(config, ControllerConfig) else ControllerConfig.from_dict(config)
+    if isinstance(config, ControllerConfig):
+        cfg = config
+    else:
+        cfg = ControllerConfig.for_robot(params.name, **(config or {}))
     planner = GaitPlanner(params)
     gait = planner.periodic_gait()
     models = step_models(params.vector(), [gait.step] * (cfg.horizon + 1), None, cfg.margin)

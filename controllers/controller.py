@@ -73,6 +73,7 @@ from typing import Any
 
 import numpy as np
 
+from configs import CONFIG_DIR
 from envs.config_util import (
     dataclass_from_mapping,
     finite_pair,
@@ -255,7 +256,22 @@ class ControllerConfig:
         return MODES[0] if self.replan else MODES[1]
 
     @classmethod
-    def for_mode(cls, mode: str, duration: float | None = None, **fields: Any) -> ControllerConfig:
+    def for_robot(cls, name: str | None, /, **changes: Any) -> ControllerConfig:
+        """The controller's defaults for the robot preset ``name`` from
+        ``configs/controller/NAME.yaml`` (the class defaults, the paper's published settings,
+        where there is no such file or ``name`` is None), with ``changes`` applied."""
+        d: dict[str, Any] = {}
+        if name is not None:
+            path = CONFIG_DIR / "controller" / f"{name}.yaml"
+            if path.exists():
+                d = read_yaml_mapping(path, "controller config")
+        d.update(changes)
+        return cls.from_dict(d)
+
+    @classmethod
+    def for_mode(
+        cls, mode: str, duration: float | None = None, robot: str | None = None, /, **fields: Any
+    ) -> ControllerConfig:
         """The config of ``mode`` (one of :data:`MODES`) with the other ``fields`` as given.
 
         Args:
@@ -263,13 +279,15 @@ class ControllerConfig:
             duration: the run's simulated time [s] (> 0, finite); in fixed-plan mode without
                 ``plan_steps`` the plan is sized for it: :data:`PLAN_STEPS_PER_SECOND` footsteps
                 a second plus the look-ahead.
+            robot: the robot preset whose defaults fill the fields not given (see
+                :meth:`for_robot`; None: the class defaults).
             fields: other :class:`ControllerConfig` fields (not ``replan``).
         """
         if mode not in MODES:
             raise ValueError(f"controller mode = {mode!r}; allowed: {', '.join(MODES)}")
         if "replan" in fields:
             raise ValueError("ControllerConfig.for_mode: give the mode, not replan")
-        config = cls(replan=mode == "replan", **fields)
+        config = cls.for_robot(robot, replan=mode == "replan", **fields)
         if mode == "fixed-plan" and duration is not None and "plan_steps" not in fields:
             d = real_setting("duration", duration, "a finite number > 0 [s]")
             if not d > 0:
@@ -304,7 +322,8 @@ class TransverseController:
         robot: robot parameters or preset name.
         terrain: the terrain map (a :class:`Terrain`, spec or kind name); :meth:`reset` may
             give another one for the new run.
-        config: :class:`ControllerConfig` or a dict of its fields.
+        config: :class:`ControllerConfig`, or a dict of the fields that differ from the robot's
+            defaults (:meth:`ControllerConfig.for_robot`; None: those defaults).
         planner: a :class:`GaitPlanner`, a :class:`PlannerConfig`/dict for a new one, or None
             (the robot's default planner).
 
@@ -335,7 +354,9 @@ class TransverseController:
         self.robot = as_params(robot)
         self.P = self.robot.vector()
         self.terrain = as_terrain(terrain)
-        self.config = ControllerConfig.from_dict(config)
+        if not isinstance(config, ControllerConfig):
+            config = ControllerConfig.for_robot(self.robot.name, **(config or {}))
+        self.config = config
         if isinstance(planner, GaitPlanner):
             self.planner = planner
         else:

@@ -68,7 +68,9 @@ class ReferencePolicy:
 
     Args:
         env: the environment (as ``gym.make`` returns it; wrappers are looked through).
-        config: :class:`ControllerConfig` or dict (default: replan at every footstep, h = 3).
+        config: :class:`ControllerConfig`, or a dict of the fields that differ from the robot's
+            defaults (:meth:`ControllerConfig.for_robot`; default: those, which replan at every
+            footstep with h = 3).
         planner: :class:`GaitPlanner`, :class:`PlannerConfig`, dict or None (robot default).
         eps: observer time constant [s]; None: from the encoders' noise
             (:func:`controllers.observer.eps_for_noise`: 0.04 on the nominal sensors, 0.11 with
@@ -149,8 +151,6 @@ class ReferencePolicy:
         self.identifier: SwingIdentifier | None = None
         if self.identify:
             self.identifier = SwingIdentifier(self.robot, est.dt, est.angle_sigma)
-        if config is None:
-            config = ControllerConfig()
         # the episode's course is known at its first tick: the controller gets it at reset
         self.controller = self.controller_class(
             self.robot, est.terrain, config, planner, **controller_kwargs

@@ -23,6 +23,7 @@ from agents.evaluate import (
     write_json,
 )
 from agents.policies import ZeroPolicy
+from controllers import ControllerConfig
 from controllers.planner import PlannerConfig
 
 SLOPE = "roughwalk/CompassGaitSlope-v0"
@@ -241,6 +242,8 @@ def test_planner_controller_and_observer_options_reach_the_reference_policy():
     # the rest of the planner config is the robot preset's
     assert ctrl.planner.config.target_speed == PlannerConfig.for_robot("paper").target_speed
     assert ctrl.config.horizon == 2 and ctrl.config.mode == "replan"
+    # ... and so is the rest of the controller config
+    assert ctrl.config == ControllerConfig.for_robot("paper", horizon=2)
     assert policy.estimator.observer.eps == 0.03
     env.close()
 
@@ -251,7 +254,8 @@ def test_planner_controller_and_observer_options_reach_the_reference_policy():
         ("reference", {"planner": {"min_thetadot": -1}}, r"min_thetadot"),
         ("reference", {"planner": {"speed": 1}}, r"speed"),
         ("reference", {"controller": {"horizon": 0}}, r"horizon"),
-        ("reference", {"controller": {"gain": 1}}, r"controller: .*gain"),
+        ("reference", {"controller": {"gain": 1}}, r"controller setting.*gain"),
+        ("reference", {"controller": {"robot": "classic"}}, r"controller setting.*robot"),
         ("reference", {"observer_eps": 0.0}, r"observer_eps = 0.0; allowed: a number > 0"),
         ("reference", {"observer_eps": "fast"}, r"observer_eps = 'fast'; allowed"),
         ("passive", {"planner": {"min_thetadot": 0.3}}, r"planner: applies to the pd and"),

@@ -1,10 +1,12 @@
 """Transverse controller in closed loop with the hybrid simulator (state feedback)."""
 
 import math
+from dataclasses import replace
 
 import numpy as np
 import pytest
 
+from controllers import controller as controller_module
 from controllers.controller import (
     MODES,
     ControllerConfig,
@@ -369,6 +371,36 @@ def test_controller_modes():
         ControllerConfig.for_mode("fixed-plan", -1.0)
     with pytest.raises(ValueError, match="give the mode, not replan"):
         ControllerConfig.for_mode("replan", replan=False)
+
+
+def test_controller_defaults_per_robot(tmp_path, monkeypatch):
+    from configs import CONFIG_DIR
+    from envs.config_util import read_yaml_mapping
+
+    shipped = read_yaml_mapping(CONFIG_DIR / "controller" / "paper.yaml", "controller config")
+    paper = ControllerConfig.for_robot("paper")
+    assert paper == ControllerConfig.from_dict(shipped)
+    assert ControllerConfig.for_robot("paper", horizon=2) == replace(paper, horizon=2)
+    # no file: the class defaults (the paper's published settings)
+    assert ControllerConfig.for_robot("custom") == ControllerConfig.for_robot(None)
+    assert ControllerConfig.for_robot(None) == ControllerConfig()
+    # a robot's file fills the fields not given, wherever a config is built from fields
+    (tmp_path / "controller").mkdir()
+    (tmp_path / "controller" / "paper.yaml").write_text("Q: [1.0, 9.0, 4.0]\nhorizon: 2\n")
+    monkeypatch.setattr(controller_module, "CONFIG_DIR", tmp_path)
+    mine = ControllerConfig.for_robot("paper", horizon=4)
+    assert mine.Q == (1.0, 9.0, 4.0) and mine.horizon == 4
+    assert ControllerConfig.for_mode("fixed-plan", 10.0, "paper").Q == (1.0, 9.0, 4.0)
+    assert ControllerConfig.for_mode("fixed-plan", 10.0).Q == (1.0, 1.0, 1.0)
+    ctrl = TransverseController("paper", "flat", {"tube_ticks": 3})
+    assert ctrl.config == replace(ControllerConfig(Q=(1.0, 9.0, 4.0), horizon=2), tube_ticks=3)
+    assert TransverseController("paper", "flat").config.Q == (1.0, 9.0, 4.0)
+    # a ControllerConfig is taken as it is
+    assert TransverseController("paper", "flat", ControllerConfig()).config == ControllerConfig()
+    assert TransverseController("classic", "flat").config == ControllerConfig()
+    (tmp_path / "controller" / "paper.yaml").write_text("Qx: [1.0, 9.0, 4.0]\n")
+    with pytest.raises(ValueError, match="Qx"):
+        ControllerConfig.for_robot("paper")
 
 
 def tube_loop(z0, steps, **config):
