@@ -218,17 +218,17 @@ def run(args: argparse.Namespace) -> int:
     radii = list(args.radii)
     if any(b <= a for a, b in zip(radii, radii[1:])):
         raise ValueError(f"--radii: sizes must increase, got {radii}")
-    config = controller_config(args.controller)
+    config = controller_config(args.controller, args.robot)
     out: Path = args.out
     with claim_output_folder(out, OUTPUTS, args.overwrite):
         return _measure(args, out, radii, config)
 
 
-def controller_config(pairs: list[tuple[str, Any]] | None) -> ControllerConfig:
-    """The controller's settings from ``--controller KEY=VALUE`` pairs (None: the defaults);
-    a bad field or value raises ``ValueError`` naming it."""
+def controller_config(pairs: list[tuple[str, Any]] | None, robot: str) -> ControllerConfig:
+    """The controller's settings from ``--controller KEY=VALUE`` pairs over the defaults of the
+    robot preset ``robot``; a bad field or value raises ``ValueError`` naming it."""
     try:
-        return ControllerConfig.from_dict(dict(pairs or ()))
+        return ControllerConfig.for_robot(robot, **dict(pairs or ()))
     except (TypeError, ValueError) as exc:
         raise ValueError(f"--controller: {exc}") from None
 
@@ -306,6 +306,7 @@ def _measure(
         "slices": args.slices,
         "slice_radius": slice_r,
         "controller": dict(args.controller or ()),
+        "controller_config": config.to_dict(),
         "simulation": "exact hybrid simulator, reference controller on the true state",
     }
     data = {

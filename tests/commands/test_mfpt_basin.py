@@ -105,7 +105,9 @@ def test_basin_metric_follows_the_controller_weights(tmp_path: Path):
     assert main([*argv, "--controller", "Q=[1,1,1]", "R=2", "--out", str(out)]) == 0
     data = json.loads((out / "basin.json").read_text())
     assert data["settings"]["controller"] == {"Q": [1, 1, 1], "R": 2}
-    config = ControllerConfig(Q=(1.0, 1.0, 1.0), R=2.0)
+    # over the robot's defaults, recorded in full
+    config = ControllerConfig.for_robot("paper", Q=(1.0, 1.0, 1.0), R=2.0)
+    assert data["settings"]["controller_config"] == json.loads(json.dumps(config.to_dict()))
     np.testing.assert_allclose(data["P"], periodic_reference("paper", config).P, rtol=1e-12)
     assert not np.allclose(data["P"], periodic_reference("paper").P)
 
