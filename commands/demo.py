@@ -47,6 +47,7 @@ from commands.cli import (
     env_id,
     float_range,
     int_range,
+    key_value,
 )
 from controllers import ControllerConfig, make_reference_policy
 from controllers.controller import MODES
@@ -88,6 +89,14 @@ def configure(parser: argparse.ArgumentParser) -> None:
         "1.5 a second plus the look-ahead)",
     )
     parser.add_argument(
+        "--controller",
+        nargs="+",
+        type=key_value,
+        metavar="KEY=VALUE",
+        help="controller settings (ControllerConfig fields) over the robot's defaults, e.g. "
+        "Q=[1,1,1] friction_limit=0 for the paper's weights",
+    )
+    parser.add_argument(
         "--output", type=Path, default=Path("outputs/demo"), help="folder for the figures"
     )
     parser.add_argument(
@@ -124,6 +133,7 @@ def rollout(
     frames: bool = False,
     mode: str = "replan",
     plan_steps: int | None = None,
+    controller: dict[str, Any] | None = None,
 ) -> dict[str, Any]:
     """Run the reference policy on ``env_id``.
 
@@ -138,16 +148,19 @@ def rollout(
             (:data:`controllers.controller.MODES`).
         plan_steps: footsteps of the fixed plan (None: sized for the run's duration, see
             :meth:`controllers.ControllerConfig.for_mode`); replan mode ignores it.
+        controller: other :class:`controllers.ControllerConfig` fields (not ``horizon``,
+            ``replan`` or ``plan_steps``) over the robot's defaults.
 
     Returns:
         The policy's history, the true states, stance feet and legs per tick, the records, the
         failure (or None), footsteps, distance [m], the terrain and robot, and the frames
         (Pillow palette images) and their period [s].
     """
+    check_controller(controller)
     env = gym.make(env_id, render_mode="rgb_array" if frames else None)
     dt = env.unwrapped.dt
     duration = episode_duration(env) if duration is None else duration
-    fields: dict[str, Any] = {"horizon": horizon}
+    fields: dict[str, Any] = {**(controller or {}), "horizon": horizon}
     if plan_steps is not None and mode == "fixed-plan":
         fields["plan_steps"] = plan_steps
     config = ControllerConfig.for_mode(
@@ -379,12 +392,23 @@ def write_gif(frames: list[Any], path: Path, frame_period: float) -> Path:
     return path
 
 
+def check_controller(controller: dict[str, Any] | None) -> None:
+    """Check the demo's controller settings: :class:`ControllerConfig` fields other than those
+    with their own argument; ``ValueError`` naming a bad one."""
+    own = {"horizon": "--horizon", "replan": "--controller-mode", "plan_steps": "--plan-steps"}
+    for key, option in own.items():
+        if key in (controller or {}):
+            raise ValueError(f"--controller: {key} has its own option, {option}")
+    ControllerConfig.from_dict(dict(controller or {}))
+
+
 def run(args: argparse.Namespace) -> int:
     """``roughwalk demo`` with the parsed ``args``: the table, the figures; returns the exit
     status (1 if the walker failed)."""
     console = Console(highlight=False)
     if args.plan_steps is not None and args.controller_mode != "fixed-plan":
         raise ValueError("--plan-steps: applies to --controller-mode fixed-plan only")
+    check_controller(dict(args.controller or ()))
     if not args.no_figures:
         check_output_path(args.output, directory=True, option="--output")
     announce_compilation(SIMULATOR_KERNELS + CONTROLLER_KERNELS, console)
@@ -396,6 +420,7 @@ def run(args: argparse.Namespace) -> int:
         frames=args.gif,
         mode=args.controller_mode,
         plan_steps=args.plan_steps,
+        controller=dict(args.controller or ()),
     )
     title = f"{args.env}, seed {args.seed}, {args.controller_mode}: one row per footstep"
     table = Table(title=escape(title), box=box.SIMPLE_HEAD, show_edge=False, padding=(0, 1, 0, 0))

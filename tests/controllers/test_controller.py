@@ -22,6 +22,8 @@ from envs.physics.terrain import Terrain
 DT = 0.001  # control period of these tests [s]
 V_FLOOR = 0.01  # V reachable with a 1 ms zero-order hold (discretisation floor)
 RATE_BOUND = 0.8  # asserted bound on the per-step contraction of sqrt(V) = |x_perp|_P
+#: the paper's feedback weights without the friction clip (the README's certificate figures)
+PAPER_WEIGHTS = {"Q": (1.0, 1.0, 1.0), "friction_limit": 0.0}
 
 TERRAINS = {
     "flat": Terrain.flat(),
@@ -43,11 +45,17 @@ def state_from_z(step, theta, z):
     return np.array([c.phi(theta) + z[1], theta, c.dphi(theta) * td + z[2], td])
 
 
-def closed_loop(cls, terrain, z0, steps, replan=False, robot="paper", end=None, **kwargs):
+def closed_loop(
+    cls, terrain, z0, steps, replan=False, robot="paper", end=None, weights=None, **kwargs
+):
     """Plan from the nominal start, start perturbed by ``z0`` in transverse coordinates, run
     ``steps`` footsteps. Returns (failure, records); ``end`` (a dict) receives the final
-    stance-foot position."""
-    ctrl = cls(robot, terrain, ControllerConfig(replan=replan, plan_steps=steps + 3), **kwargs)
+    stance-foot position; ``weights``: ControllerConfig fields that differ from the robot's
+    defaults (e.g. PAPER_WEIGHTS)."""
+    config = ControllerConfig.for_robot(
+        robot, replan=replan, plan_steps=steps + 3, **(weights or {})
+    )
+    ctrl = cls(robot, terrain, config, **kwargs)
     gait = ctrl.planner.periodic_gait()
     ctrl.reset(gait.q, gait.qd)
     x0 = state_from_z(ctrl.solution.steps[0], gait.q[1], np.asarray(z0, float))
@@ -103,9 +111,12 @@ def test_flat_converges_from_perturbed_starts(name):
     V = np.array([r.V_start for r in recs])
     # |x_perp| in the controller's own norm sqrt(V) contracts step after step
     above = V > V_FLOOR
-    assert above.sum() >= 2
-    rate = contraction_rate(np.sqrt(V[above]))
-    assert rate < RATE_BOUND, f"{name}: per-step contraction {rate:.3f}"
+    assert above[0]
+    if above.sum() >= 2:
+        rate = contraction_rate(np.sqrt(V[above]))
+        assert rate < RATE_BOUND, f"{name}: per-step contraction {rate:.3f}"
+    else:  # at the floor after one footstep (the stiff feedback on a y_dot start)
+        assert V[1] < 0.01 * V[0]
     assert np.all(np.diff(V[above]) < 0)
     assert V[-1] < 0.1 * V[0]
     # V decreases along every continuous phase (up to the zero-order-hold floor)
@@ -145,7 +156,7 @@ def test_rough_terrain_tracks_a_fixed_plan_from_perturbed_starts(terrain):
         # sqrt(V) shrinks by RATE_BOUND per step or better over the first four steps (or V is
         # down at the discretisation floor), and ends at the floor
         assert V[4] < max(RATE_BOUND**8 * V[0], V_FLOOR)
-        assert V[-1] < V_FLOOR
+        assert V[-1] < max(V_FLOOR, 0.02 * V[0])
         for r in recs:  # V decreases along each step while well above the floor
             if r.V_start > 5 * V_FLOOR:
                 assert r.V_end < r.V_start
@@ -179,12 +190,20 @@ def test_replanning_walks_rough_terrain_from_perturbed_starts(terrain):
 
 
 def test_classic_walker_climbs_stairs_from_perturbed_starts():
-    """The classic walker (1 m legs) up two 1 cm rises with replanning at every footstep."""
+    """The classic walker (1 m legs) up two 1 cm rises with replanning at every footstep, with
+    its defaults, the paper's weights (the paper robot's stiffer ones stall or slip on 5 of 16
+    slow starts of this robot, I = -0.12 to -0.08, where the paper's walk all 16)."""
     stairs = Terrain.staircase(1.0, 3, 1.0, 0.01)
     for z0 in ((-0.1, 0.005, -0.1), (0.08, -0.005, 0.1)):
         end: dict = {}
         failure, recs = closed_loop(
-            TransverseController, stairs, z0, steps=10, replan=True, robot="classic", end=end
+            TransverseController,
+            stairs,
+            z0,
+            steps=10,
+            replan=True,
+            robot="classic",
+            end=end,
         )
         assert failure is None, f"{z0}: {failure}"
         assert all(r.fallback != "zero input" for r in recs), [r.reason for r in recs]
@@ -273,12 +292,17 @@ CERT_Z0 = (-0.1, 0.0, 0.0)  # start 0.1 rad^2/s^2 below the planned theta_dot^2
 def test_fixed_plan_lyapunov_value_falls_from_footstep_to_footstep(terrain):
     """Fixed plan (the paper's Appendix A setting): V = x_perp' P x_perp, P = Z^-1 of each
     step's own jump-Riccati solve, falls along every step and from each step's start to the
-    next, from a perturbed start, while above the 1 ms hold's floor."""
-    failure, recs = closed_loop(TransverseController, TERRAINS[terrain], CERT_Z0, steps=6)
+    next, from a perturbed start, while above the 1 ms hold's floor. The paper's weights (the
+    README's figures); the default weights in the next test."""
+    failure, recs = closed_loop(
+        TransverseController, TERRAINS[terrain], CERT_Z0, steps=6, weights=PAPER_WEIGHTS
+    )
     assert failure is None and all(r.fallback is None for r in recs)
     # V at the first tick uses P of the first solve at theta+ (the tick is at theta+ exactly)
     ctrl = TransverseController(
-        "paper", TERRAINS[terrain], ControllerConfig.for_mode("fixed-plan", plan_steps=9)
+        "paper",
+        TERRAINS[terrain],
+        ControllerConfig.for_mode("fixed-plan", plan_steps=9, **PAPER_WEIGHTS),
     )
     gait = ctrl.planner.periodic_gait()
     ctrl.reset(gait.q, gait.qd)
@@ -313,6 +337,21 @@ def test_fixed_plan_lyapunov_value_falls_from_footstep_to_footstep(terrain):
     assert np.all((np.minimum(V_end[:-1], V_start[1:]) < V_start[:-1])[falling])
     assert np.all((np.diff(V_start) < 0)[falling])
     assert V_start[-1] < 0.1 * V_start[0]
+
+
+def test_fixed_plan_lyapunov_value_falls_with_the_default_weights():
+    """The same certificate with the default (stiffer) weights, whose P weighs y and y_dot far
+    more: on flat ground from the same start V_end / V_start is 0.7-0.91 on every step and V
+    falls by more than half from each footstep's start to the next."""
+    failure, recs = closed_loop(TransverseController, "flat", CERT_Z0, steps=6)
+    assert failure is None and all(r.fallback is None for r in recs)
+    V_start = np.array([r.V_start for r in recs])
+    V_end = np.array([r.V_end for r in recs])
+    assert V_start[0] == pytest.approx(9.53, abs=0.05)
+    assert all(0.65 < r.V_ratio < 0.95 for r in recs)
+    assert np.all(V_start[1:] < V_end[:-1])
+    assert np.all(V_start[1:] / V_start[:-1] < 0.55)
+    assert V_start[-1] < 0.03 * V_start[0]
 
 
 @pytest.mark.parametrize("terrain", ["flat", "paper_stairs"])
@@ -406,7 +445,7 @@ def test_controller_defaults_per_robot(tmp_path, monkeypatch):
 def tube_loop(z0, steps, **config):
     """Plan from the nominal flat-ground start, start ``z0`` off it in transverse coordinates,
     replan at every footstep with ``config``; returns (failure, records)."""
-    ctrl = TransverseController("paper", TERRAINS["flat"], ControllerConfig(**config))
+    ctrl = TransverseController("paper", TERRAINS["flat"], config)
     gait = ctrl.planner.periodic_gait()
     ctrl.reset(gait.q, gait.qd)
     x0 = state_from_z(ctrl.solution.steps[0], gait.q[1], np.asarray(z0, float))
@@ -427,12 +466,12 @@ def tube_loop(z0, steps, **config):
 def test_replanning_within_a_step_rescues_a_start_slower_than_planned(deficit):
     """theta_dot^2 below the plan's by 0.35-0.4 rad^2/s^2 (about 40-50 % of the gait's 0.83
     after impact: a push, a lighter robot, a poor velocity estimate at the impact): tracking
-    the plan slips; leaving the tube replans the rest of the step from the actual state, and
-    the walker goes on. (With the gait's speed reserve at mid-stance, 0.2-0.3 less is tracked
-    without a replan.)"""
+    the plan slips or trips; leaving the tube replans the rest of the step from the actual
+    state, and the walker goes on. (With the gait's speed reserve at mid-stance, 0.2-0.3 less
+    is tracked without a replan.)"""
     z0 = (deficit, 0.0, 0.0)
     failure, recs = tube_loop(z0, 4, tube_replans=0)
-    assert failure == "slip" and recs[0].retargets == 0
+    assert failure in ("slip", "trip") and recs[0].retargets == 0
     failure, recs = tube_loop(z0, 4)  # the default: tube_energy 0.25, one replan per step
     assert ControllerConfig().tube_energy == 0.25 and ControllerConfig().tube_replans == 1
     assert failure is None and len(recs) == 4
