@@ -45,16 +45,21 @@ def test_the_default_duration_is_the_whole_episode(capsys):
     assert "unfinished" in rows[-1] or "unfinished" in rows[-2]
 
 
-def test_the_walk_steps_down_one_stair_at_a_time():
-    res = demo.rollout(STAIRS, seed=0, duration=4.0)
+#: the paper's feedback weights without the friction clip, as demo --controller settings
+PAPER_WEIGHTS = {"Q": [1.0, 1.0, 1.0], "friction_limit": 0.0}
+
+
+@pytest.mark.parametrize(("controller", "on_top"), [(None, 3), (PAPER_WEIGHTS, 2)])
+def test_the_walk_steps_down_one_stair_at_a_time(controller, on_top):
+    """The start foot and ``on_top`` touchdowns on the flat (the first step, from standing, is
+    a short one; with the stiff default feedback the replans then take two more short ones,
+    with the paper's weights one), then one touchdown on each stair."""
+    res = demo.rollout(STAIRS, seed=0, duration=4.0, controller=controller)
     assert res["failure"] is None
     feet = res["foot"]
     heights = [y for i, (x, y) in enumerate(feet) if i == 0 or (feet[i - 1] != feet[i]).any()]
-    top = next(i for i, y in enumerate(heights) if y != 0.0)
-    # the start foot and at least two touchdowns on top (the first step is a short one from
-    # standing), then one touchdown on each stair
-    assert top >= 3 and heights[:top] == [0.0] * top
-    assert heights[top : top + 2] == pytest.approx([-0.03, -0.06])
+    assert heights[: on_top + 1] == [0.0] * (on_top + 1)
+    assert heights[on_top + 1 : on_top + 3] == pytest.approx([-0.03, -0.06])
 
 
 def test_demo_rollout_and_table_rows():
@@ -83,16 +88,19 @@ def test_the_table_shows_the_lyapunov_value_per_footstep_in_both_modes(capsys):
     """V at each step's start and end, their ratio, the largest |x_perp| and |u|: in replan mode
     every step after the first starts on its own fresh plan (V start about 0)."""
     argv = ["demo", "--no-figures", "--duration", "3"]
-    assert main(argv) == 0
-    out = capsys.readouterr().out
-    for header in ("start", "end", "/V start", "|x_perp|", "|u|"):
-        assert header in out
-    rows = [line.split() for line in out.splitlines() if line.split() and line.split()[0].isdigit()]
-    assert len(rows) >= 4 and all(len(r) >= 10 for r in rows)
-    assert f"replan: V end/start < 1 on 0 of {len(rows) - 1} completed footsteps" in out
-    assert all(float(r[4]) < 1e-12 for r in rows)  # V start, replanned at every touchdown
-    assert all(0 < float(r[5]) < 10 for r in rows)  # V end
-    assert all(float(r[8]) <= 15 for r in rows)  # max |u| within the actuator limit
+    paper = ["--controller", "Q=[1,1,1]", "friction_limit=0"]
+    # the paper's weights, then the stiff default, whose P weighs y far more (larger V)
+    for settings, footsteps, v_end in ((paper, 3, 1.0), ([], 4, 2.5)):
+        assert main([*argv, *settings]) == 0
+        out = capsys.readouterr().out
+        for header in ("start", "end", "/V start", "|x_perp|", "|u|"):
+            assert header in out
+        assert f"replan: V end/start < 1 on 0 of {footsteps} completed footsteps" in out
+        rows = [ln.split() for ln in out.splitlines() if ln.split() and ln.split()[0].isdigit()]
+        assert len(rows) == footsteps + 1 and all(len(r) >= 10 for r in rows)
+        assert all(float(r[4]) < 1e-12 for r in rows)  # V start, replanned at every touchdown
+        assert all(0 < float(r[5]) < v_end for r in rows)  # V end
+        assert all(float(r[8]) <= 15 for r in rows)  # max |u| within the actuator limit
     assert main([*argv, "--controller-mode", "fixed-plan"]) == 0
     out = capsys.readouterr().out
     rows = [line.split() for line in out.splitlines() if line.split() and line.split()[0].isdigit()]
