@@ -4,8 +4,9 @@ Perturbs the post-impact state of the periodic gait in its transverse coordinate
 y_dot] at its post-impact phase theta+, and simulates each start for --steps footsteps
 with the exact hybrid simulator and the reference controller (replanning at every footstep) on
 the true state: no sensors, no observer. A start converged when it walked every footstep and
-ended with V = z' P z <= --v-tol in the periodic gait's coordinates (P: the jump-Riccati
-solution of the controller over the periodic step). Perturbations: --per-radius directions
+ended with V_c = z' P_c z <= --v-tol in the periodic gait's coordinates (P_c: the jump-Riccati
+solution over the periodic step with the paper's weights, whatever the controller's, so that
+one tolerance serves every controller). Perturbations: --per-radius directions
 uniform on each ellipsoid z' P z = r^2, r in --radii; perturbations with no state
 (theta_dot^2 + I <= 0, or the retracted trailing foot below the ground) are left out and
 counted.
@@ -97,8 +98,8 @@ def configure(parser: argparse.ArgumentParser) -> None:
         "--v-tol",
         type=float_range(0, lo_open=True),
         default=DEFAULT_V_TOL,
-        help="largest V at the end that counts as converged (V of the unperturbed gait after "
-        "16 footsteps: about 0.008)",
+        help="largest V_c (the paper weights' metric) at the end that counts as converged (the "
+        "unperturbed gait's after 16 footsteps: about 0.008)",
     )
     parser.add_argument(
         "--slices", type=int_range(0, 200), default=9, help="grid size of the 2-D slices (0: none)"

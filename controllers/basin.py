@@ -11,12 +11,17 @@ is simulated in closed loop for ``K`` footsteps by the exact hybrid simulator wi
 reference controller (:class:`controllers.TransverseController`, replanning at every footstep)
 on the true state (no sensors, no observer): :meth:`TransverseController.rollout`.
 
-A start *converged* when the walker completed ``K`` footsteps without a failure and its state
-just before the ``K``-th touchdown has ``V = z' P(theta) z <= v_tol`` in the periodic gait's
-coordinates. ``P(theta) = Z^-1`` is the jump-Riccati solution of the controller's weights over
-the periodic step repeated over the horizon (:func:`controllers.gains.horizon_gains`);
+``P(theta) = Z^-1`` is the jump-Riccati solution of the controller's weights over the
+periodic step repeated over the horizon (:func:`controllers.gains.horizon_gains`);
 ``P(theta+)`` sizes the perturbations: directions are uniform on the unit sphere mapped onto
 the ellipsoid ``z' P z = r^2``, so ``V`` of a start is ``r^2``.
+
+A start *converged* when the walker completed ``K`` footsteps without a failure and its state
+just before the ``K``-th touchdown has ``V_c = z' P_c(theta) z <= v_tol`` in the periodic
+gait's coordinates, ``P_c`` the same solution with the paper's weights (``Q = Qj = I``,
+``R = 1``; the controller's other settings): a metric that does not follow the controller's
+weights, so one tolerance serves all of them (stiff weights' ``P`` weighs the speed
+coordinate ``I`` a thousand times more near the touchdown, where the walks end).
 
 Certified level set (:func:`certified_level`): the largest ``rho`` such that no sampled start
 with ``V < rho`` failed to converge, chosen on one half of the samples and checked on the
@@ -63,9 +68,12 @@ COORDS = ("I", "y", "y_dot")
 NO_STATE = "no state"
 
 
-#: largest ``V`` at the end of a start that counts as converged: about four times the floor the
-#: unperturbed gait settles at (0.008 after 16 footsteps; the 5 ms zero-order hold)
+#: largest ``V_c`` (the paper weights' metric) at the end of a start that counts as converged:
+#: about four times the floor the unperturbed gait settles at (0.008 after 16 footsteps with the
+#: paper's weights; the 5 ms zero-order hold)
 DEFAULT_V_TOL = 0.03
+#: the feedback weights of the convergence metric: the paper's (the class defaults)
+METRIC_WEIGHTS = {"Q": (1.0, 1.0, 1.0), "R": 1.0, "Qj": (1.0, 1.0, 1.0)}
 
 
 @dataclass
@@ -78,6 +86,8 @@ class PeriodicReference:
             times (``solution.lyapunov(z, theta)`` is ``V``).
         P: ``Z^-1`` at the post-impact phase ``theta+`` (3 x 3, symmetric positive definite).
         config: the controller's settings.
+        metric: the same solution with :data:`METRIC_WEIGHTS` (the convergence test's ``V_c``;
+            ``solution`` itself where the controller has those weights).
     """
 
     robot: RobotParams
@@ -87,11 +97,18 @@ class PeriodicReference:
     P: np.ndarray
     config: ControllerConfig
     planner: GaitPlanner = field(repr=False)
+    metric: HorizonSolution | None = field(default=None, repr=False)
 
     def lyapunov(self, x: np.ndarray) -> float:
         """``V = z' P(theta) z`` of a state ``x = (q1, q2, q1d, q2d)`` [rad, rad/s] in the
         periodic gait's transverse coordinates ``z``."""
         return self.solution.lyapunov(self.model.coords(np.asarray(x, float)), float(x[1]))
+
+    def convergence_value(self, x: np.ndarray) -> float:
+        """``V_c = z' P_c(theta) z`` of a state ``x`` [rad, rad/s], the metric of the
+        convergence test (:data:`METRIC_WEIGHTS`, whatever the controller's weights)."""
+        sol = self.solution if self.metric is None else self.metric
+        return sol.lyapunov(self.model.coords(np.asarray(x, float)), float(x[1]))
 
 
 def periodic_reference(
@@ -110,7 +127,9 @@ def periodic_reference(
     models = step_models(params.vector(), [gait.step] * (cfg.horizon + 1), None, cfg.margin)
     sol = horizon_gains(models, cfg)
     P = 0.5 * (sol.Zinv[0] + sol.Zinv[0].T)
-    return PeriodicReference(params, gait, models[0], sol, P, cfg, planner)
+    metric_cfg = replace(cfg, **METRIC_WEIGHTS)
+    metric = sol if metric_cfg == cfg else horizon_gains(models, metric_cfg)
+    return PeriodicReference(params, gait, models[0], sol, P, cfg, planner, metric)
 
 
 def perturbed_state(ref: PeriodicReference, z: Sequence[float]) -> np.ndarray | None:
@@ -138,9 +157,10 @@ class BasinSample:
 
     Attributes:
         z: the perturbation ``[I, y, y_dot]`` [rad^2/s^2, rad, rad/s]; V0: ``z' P z``.
-        converged: completed ``K`` footsteps and ended with ``V <= v_tol``.
-        footsteps: footsteps completed; V_end: ``V`` before the last touchdown (NaN if none).
-        end: ``converged``, ``not converged`` (walked but ``V > v_tol``), the simulator's
+        converged: completed ``K`` footsteps and ended with ``V_c <= v_tol``.
+        footsteps: footsteps completed; V_end: ``V_c`` (the convergence metric) before the last
+            touchdown (NaN if none).
+        end: ``converged``, ``not converged`` (walked but ``V_c > v_tol``), the simulator's
             failure reason (``fall``, ``trip``, ...) or ``no state`` (no such post-impact state).
         fallbacks: footsteps on which the controller fell back (planning failed).
     """
@@ -167,7 +187,7 @@ def run_perturbation(
         ref: the periodic gait (:func:`periodic_reference`).
         z: perturbation ``[I, y, y_dot]`` [rad^2/s^2, rad, rad/s], finite.
         steps: footsteps ``K`` to walk, >= 1.
-        v_tol: largest ``V`` at the end that counts as converged, > 0.
+        v_tol: largest ``V_c`` (the convergence metric) at the end that counts as converged, > 0.
         dt: control period [s], > 0.
     """
     zz = np.asarray(z, dtype=np.float64)
@@ -191,7 +211,7 @@ def run_perturbation(
     V_end = math.nan
     if n:
         last = np.concatenate([out["q"][-1], out["qd"][-1]])
-        V_end = ref.lyapunov(last)
+        V_end = ref.convergence_value(last)
     if out["failure"] is not None:
         end = str(out["failure"])
     elif n < steps:

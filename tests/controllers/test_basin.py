@@ -7,6 +7,7 @@ import math
 import numpy as np
 import pytest
 
+from controllers import ControllerConfig
 from controllers.basin import (
     DEFAULT_V_TOL,
     NO_STATE,
@@ -40,6 +41,21 @@ def test_zero_perturbation_converges(ref):
     assert s.converged and s.end == "converged" and s.footsteps == 16
     # the floor of the 5 ms zero-order hold, well inside the convergence tolerance
     assert s.V0 == 0.0 and s.V_end < 0.01 < DEFAULT_V_TOL
+
+
+def test_convergence_is_measured_in_a_metric_that_does_not_follow_the_weights(ref):
+    """V (the ellipsoids) follows the controller's weights, V_c (the convergence test) is the
+    paper weights' metric for every controller: the stiff default's walks are judged as the
+    paper weights' are."""
+    stiff = periodic_reference("paper", ControllerConfig.for_robot("paper"))
+    paper = periodic_reference("paper", ControllerConfig())
+    assert stiff.config.Q != paper.config.Q and paper.metric is paper.solution
+    x = perturbed_state(ref, [0.02, 0.003, -0.05])
+    x[1] += 0.3  # a phase late in the step, where the walks end
+    assert stiff.convergence_value(x) == pytest.approx(paper.convergence_value(x), rel=1e-12)
+    assert stiff.lyapunov(x) > 10 * paper.lyapunov(x)
+    s = run_perturbation(stiff, [0.0, 0.0, 0.0], steps=16)
+    assert s.converged and s.V_end < 0.01 < DEFAULT_V_TOL
 
 
 def test_huge_perturbations_fail_or_have_no_state(ref):
