@@ -72,8 +72,8 @@ NO_STATE = "no state"
 #: about four times the floor the unperturbed gait settles at (0.008 after 16 footsteps with the
 #: paper's weights; the 5 ms zero-order hold)
 DEFAULT_V_TOL = 0.03
-#: the feedback weights of the convergence metric: the paper's (the class defaults)
-METRIC_WEIGHTS = {"Q": (1.0, 1.0, 1.0), "R": 1.0, "Qj": (1.0, 1.0, 1.0)}
+#: the feedback weights of the convergence metric: the paper's (the controller's class defaults)
+METRIC_WEIGHTS = {name: getattr(ControllerConfig(), name) for name in ("Q", "R", "Qj")}
 
 
 @dataclass
