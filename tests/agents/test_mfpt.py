@@ -18,6 +18,7 @@ from agents.mfpt import (
     roughness_terrain,
     run_walks,
 )
+from controllers import ControllerConfig
 
 
 def geometric_walks(
@@ -142,6 +143,8 @@ def test_controller_settings_reach_the_policies():
     # checked here, completed from the robot's defaults by the controller
     (config,) = policy_options("reference", {"Q": [1, 1, 1], "R": 2}).values()
     assert config == {"Q": [1, 1, 1], "R": 2}
+    completed = ControllerConfig.for_robot("paper", **config)
+    assert completed.Q == (1.0, 1.0, 1.0) and completed.R == 2.0
     for policy, bad, match in (
         ("passive", {"R": 2}, "not to passive"),
         ("reference", {"R": -1}, "ControllerConfig.R"),
