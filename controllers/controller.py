@@ -73,11 +73,11 @@ from typing import Any
 
 import numpy as np
 
-from configs import CONFIG_DIR
 from envs.config_util import (
     dataclass_from_mapping,
     finite_pair,
     integer_setting,
+    preset_settings,
     read_yaml_mapping,
     real_setting,
 )
@@ -260,13 +260,7 @@ class ControllerConfig:
         """The controller's defaults for the robot preset ``name`` from
         ``configs/controller/NAME.yaml`` (the class defaults, the paper's published settings,
         where there is no such file or ``name`` is None), with ``changes`` applied."""
-        d: dict[str, Any] = {}
-        if name is not None:
-            path = CONFIG_DIR / "controller" / f"{name}.yaml"
-            if path.exists():
-                d = read_yaml_mapping(path, "controller config")
-        d.update(changes)
-        return cls.from_dict(d)
+        return cls.from_dict(preset_settings("controller", name, "controller config", changes))
 
     @classmethod
     def for_mode(

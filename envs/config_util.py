@@ -14,7 +14,8 @@ truncated or passed on).
 
 :func:`read_yaml_mapping` is the one reader of the YAML files behind these settings (env, robot,
 terrain, planner and controller files): a syntax error or a document that is not a mapping is a
-``ValueError`` naming the file and what is wrong.
+``ValueError`` naming the file and what is wrong. :func:`preset_settings` reads a robot's
+preset of planner or controller settings.
 """
 
 from __future__ import annotations
@@ -27,6 +28,8 @@ from typing import Any, TypeVar
 
 import numpy as np
 import yaml
+
+from configs import CONFIG_DIR
 
 T = TypeVar("T")
 
@@ -78,6 +81,21 @@ def read_yaml_mapping(
             f"got a {type(data).__name__}"
         )
     return data
+
+
+def preset_settings(
+    folder: str, name: str | None, what: str, changes: Mapping[str, Any]
+) -> dict[str, Any]:
+    """The settings of the robot preset ``name`` in ``configs/FOLDER/NAME.yaml`` (none where
+    there is no such file or ``name`` is None), updated with ``changes``: the mapping a
+    settings class's ``for_robot`` builds itself from (``what`` names the file in messages)."""
+    d: dict[str, Any] = {}
+    if name is not None:
+        path = CONFIG_DIR / folder / f"{name}.yaml"
+        if path.exists():
+            d = read_yaml_mapping(path, what)
+    d.update(changes)
+    return d
 
 
 def _yaml_problem(exc: yaml.YAMLError) -> str:

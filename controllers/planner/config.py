@@ -15,8 +15,12 @@ from typing import Any, ClassVar
 
 import numpy as np
 
-from configs import CONFIG_DIR
-from envs.config_util import dataclass_from_mapping, read_yaml_mapping, reject_moved_fields
+from envs.config_util import (
+    dataclass_from_mapping,
+    preset_settings,
+    read_yaml_mapping,
+    reject_moved_fields,
+)
 from envs.physics.params import MOVED_TO_ROBOT
 
 from .footholds import FootholdRules
@@ -304,12 +308,7 @@ class PlannerConfig:
     def for_robot(cls, name: str, **changes: Any) -> PlannerConfig:
         """Defaults for the robot preset ``name`` from ``configs/planner/NAME.yaml`` (built-in
         defaults if there is no such file), with ``changes`` applied."""
-        path = CONFIG_DIR / "planner" / f"{name}.yaml"
-        d: dict[str, Any] = {}
-        if path.exists():
-            d = read_yaml_mapping(path, "planner config")
-        d.update(changes)
-        return cls.from_dict(d)
+        return cls.from_dict(preset_settings("planner", name, "planner config", changes))
 
     @classmethod
     def from_yaml(cls, path: str | Path) -> PlannerConfig:

@@ -6,7 +6,7 @@ import pytest
 
 from controllers.controller import ControllerConfig
 from controllers.planner import PlannerConfig
-from envs.config_util import dataclass_from_mapping, reject_moved_fields
+from envs.config_util import dataclass_from_mapping, preset_settings, reject_moved_fields
 from envs.physics import RobotParams
 from envs.sensors import SensorConfig
 from envs.settings import EnvSettings
@@ -100,3 +100,14 @@ def test_moved_fields_name_their_replacement() -> None:
         reject_moved_fields(_Renamed, ["kp", "gain"])
     reject_moved_fields(_Renamed, ["kp"])
     reject_moved_fields(_Gains, ["gain"])  # a class without MOVED_FIELDS moves nothing
+
+
+def test_preset_settings_read_the_robots_file_and_apply_the_changes():
+    """The paper robot's controller preset (its stiff weights), updated by the changes; no
+    file, or no robot, gives the changes alone."""
+    paper = preset_settings("controller", "paper", "controller config", {"horizon": 2})
+    assert paper["Q"] == [1.0, 40000.0, 400.0] and paper["horizon"] == 2
+    overridden = preset_settings("controller", "paper", "controller config", {"Q": [1, 1, 1]})
+    assert overridden["Q"] == [1, 1, 1]
+    assert preset_settings("controller", "classic", "controller config", {"grid": 8}) == {"grid": 8}
+    assert preset_settings("planner", None, "planner config", {}) == {}
