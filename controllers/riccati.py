@@ -23,9 +23,12 @@ midpoints (``2 n_j + 1`` samples per segment). The optimal feedback is
 ``v = K z`` with ``K = -(w R)^-1 B' Z^-1``; see :func:`solve_jump_riccati`.
 
 The equation is stiff where the weights ask for a fast closed loop (a large ``Q`` against
-``R``): its rate near ``Z`` is at most ``L = 2 |A| + 2 max(sqrt(|G| |wQ|), |wQ| |Z|)``
-(Frobenius norms; ``G = B (wR)^-1 B'``; ``2 sqrt(|G| |wQ|)`` is the rate at which ``Z``
-settles from 0 onto its equilibrium), and RK4 is stable only for ``h L`` below about 2.8. A
+``R``): its Jacobian at ``Z`` is ``dZ -> -(A + Z wQ) dZ - dZ (A + Z wQ)'``, whose rate is at
+most ``2 |A| + 2 |Z wQ|``, and near its equilibrium ``Z* wQ Z* = G`` (``G = B (wR)^-1 B'``;
+``Z`` settles onto it from 0 at the horizon's end) ``Z* wQ`` is a square root of ``G wQ``. So
+``L = 2 |A| + 2 max(sqrt(|G wQ|), |Z wQ|)`` (Frobenius norms of the products: with ``Q`` large
+on one coordinate and ``G`` along another the products are far below the products of the
+norms), and RK4 is stable only for ``h L`` below about 2.8. A
 grid interval with ``h L > STIFF_TRIGGER`` is cut into ``ceil(h L / STIFF_STEP)`` RK4 steps,
 with ``A, G, wQ`` interpolated quadratically through the interval's three samples; the others
 take one step, so solves that are not stiff are unchanged (the paper's weights reach ``h L``
@@ -94,26 +97,36 @@ def _frobenius(M):
 
 
 @_jit
+def _frobenius_product(X, Y):
+    """``|X Y|`` (Frobenius) without forming the product."""
+    acc = 0.0
+    for a in range(X.shape[0]):
+        for b in range(Y.shape[1]):
+            v = 0.0
+            for m in range(X.shape[1]):
+                v += X[a, m] * Y[m, b]
+            acc += v * v
+    return math.sqrt(acc)
+
+
+@_jit
 def _rate_terms(A, G, Qw):
     """Per sample, the parts of the rate bound that do not depend on ``Z`` (module
-    docstring): ``2 |A|``, ``sqrt(|G| |wQ|)`` and ``|wQ|``."""
+    docstring): ``2 |A|`` and ``sqrt(|G wQ|)``."""
     N = A.shape[0]
-    out = np.empty((N, 3))
+    out = np.empty((N, 2))
     for i in range(N):
-        nq = _frobenius(Qw[i])
         out[i, 0] = 2.0 * _frobenius(A[i])
-        out[i, 1] = math.sqrt(_frobenius(G[i]) * nq)
-        out[i, 2] = nq
+        out[i, 1] = math.sqrt(_frobenius_product(G[i], Qw[i]))
     return out
 
 
 @_jit
-def _rate_bound(Z, terms, i0, im, i1):
+def _rate_bound(Z, Qw, terms, i0, im, i1):
     """Bound ``L`` on the rate of the equation over one grid interval (module docstring)."""
-    nz = _frobenius(Z)
     out = 0.0
     for i in (i0, im, i1):
-        r = terms[i, 0] + 2.0 * max(terms[i, 1], terms[i, 2] * nz)
+        r = terms[i, 0] + 2.0 * max(terms[i, 1], _frobenius_product(Z, Qw[i]))
         if r > out:
             out = r
     return out
@@ -209,7 +222,7 @@ def _solve_segments(A, G, Qw, ds, nsteps, offs, F, Qj_inv, Znodes, node_offs):
             i1 = o + 2 * k + 2
             im = o + 2 * k + 1
             i0 = o + 2 * k
-            rate = _rate_bound(Z, terms, i0, im, i1)
+            rate = _rate_bound(Z, Qw, terms, i0, im, i1)
             if h * rate > STIFF_TRIGGER:
                 m = int(math.ceil(h * rate / STIFF_STEP))
                 _substeps(Z, A, G, Qw, i0, im, i1, h, m, T, k1, k2, k3, k4, Zt, As, Gs, Qs)

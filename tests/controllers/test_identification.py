@@ -11,6 +11,7 @@ from scipy.optimize import least_squares
 import envs  # noqa: F401  (registers the ids)
 from controllers import make_reference_policy
 from controllers.identification import (
+    CHI2_99,
     COEFFICIENTS,
     ROBUST_SCALE,
     SwingIdentifier,
@@ -181,8 +182,12 @@ def test_identification_keeps_the_nominal_model_for_the_nominal_robot():
         assert info["failure"] is None
         fits = policy.diagnostics["identified"]
         assert len(fits) == 6 and not any(r.switched for r in fits)
-        # p5 (the swing leg's gravity term) is the least informed: posterior sd about 13 %
-        assert np.all(np.abs(np.array(fits[-1].relative[:5])) < (0.05,) * 4 + (0.15,)), fits[-1]
+        assert all(r.distance2 < CHI2_99 for r in fits)
+        # the last fit again, with its posterior spread: p3 and p5 (the gravity terms) are
+        # the least informed (sd 6-8 % and 10-13 % on these courses, p1, p2, p4 1-1.5 %)
+        last = policy.identifier.fit()
+        np.testing.assert_allclose(last.relative, fits[-1].relative, atol=1e-4)
+        assert np.all(np.abs(last.relative[:5]) < 3.0 * last.sigma[:5]), (last.relative, last.sigma)
         assert policy.robot is policy.nominal_robot
 
 
