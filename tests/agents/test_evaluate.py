@@ -280,8 +280,9 @@ def test_bad_controller_options_are_clear_errors(policy, options, match):
 
 def test_episodes_record_the_policys_foothold_error():
     """On legs 5 % shorter than the policy's model, dead reckoning mislocates the feet by
-    centimetres within 9 footsteps; the terrain-scan localisation keeps them within two. A
-    policy without a foot estimate records None."""
+    centimetres within 9 footsteps; the terrain-scan localisation keeps them within 2.5 (its
+    95th percentile over 200 such courses is 21 mm, README). A policy without a foot estimate
+    records None."""
     from agents.policies import make_baseline_policy
 
     env = gym.make("roughwalk/CompassGaitRough-v0", robot_error={"l": 0.05, "draw": "sign"},
@@ -291,5 +292,5 @@ def test_episodes_record_the_policys_foothold_error():
     located = run_episode(env, make_baseline_policy("reference", env), seed)
     dead = run_episode(env, make_baseline_policy("reference", env, localise=False), seed)
     assert located.footsteps >= 9
-    assert located.foot_error_max < 0.02 and dead.foot_error_max > 0.05  # m
+    assert located.foot_error_max < 0.025 and dead.foot_error_max > 0.05  # m
     assert run_episode(env, ZeroPolicy(env.action_space), seed).foot_error_max is None

@@ -6,7 +6,6 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
-from controllers import controller as controller_module
 from controllers.controller import (
     MODES,
     ControllerConfig,
@@ -425,6 +424,7 @@ def test_controller_modes():
 
 def test_controller_defaults_per_robot(tmp_path, monkeypatch):
     from configs import CONFIG_DIR
+    from envs import config_util
     from envs.config_util import read_yaml_mapping
 
     shipped = read_yaml_mapping(CONFIG_DIR / "controller" / "paper.yaml", "controller config")
@@ -437,7 +437,7 @@ def test_controller_defaults_per_robot(tmp_path, monkeypatch):
     # a robot's file fills the fields not given, wherever a config is built from fields
     (tmp_path / "controller").mkdir()
     (tmp_path / "controller" / "paper.yaml").write_text("Q: [1.0, 9.0, 4.0]\nhorizon: 2\n")
-    monkeypatch.setattr(controller_module, "CONFIG_DIR", tmp_path)
+    monkeypatch.setattr(config_util, "CONFIG_DIR", tmp_path)  # where presets are read
     mine = ControllerConfig.for_robot("paper", horizon=4)
     assert mine.Q == (1.0, 9.0, 4.0) and mine.horizon == 4
     assert ControllerConfig.for_mode("fixed-plan", 10.0, "paper").Q == (1.0, 9.0, 4.0)
