@@ -13,6 +13,7 @@ import argparse
 import os
 import time
 from collections.abc import Callable
+from dataclasses import replace
 
 import gymnasium as gym
 import numba
@@ -243,12 +244,16 @@ def controller_section(args: argparse.Namespace) -> list[Row]:
     gait = ctrl.planner.periodic_gait()
     ctrl.reset(gait.q, gait.qd)
     steps = ctrl.plan.steps[:4]
-    ric, full = [], []
+    ric, full, ric_paper = [], [], []
+    # the robot's defaults (the paper robot: stiff weights) and the paper's weights, same plan
+    paper_weights = replace(ctrl.config, Q=(1.0, 1.0, 1.0), friction_limit=0.0)
     for _ in range(reps):
         t0 = time.perf_counter()
         sol = horizon_gains(step_models(ctrl.P, steps, ctrl.terrain), ctrl.config)
         full.append(time.perf_counter() - t0)
         ric.append(sol.riccati_time)
+        sol = horizon_gains(step_models(ctrl.P, steps, ctrl.terrain), paper_weights)
+        ric_paper.append(sol.riccati_time)
     plan_t = []
     prev = None
     for _ in range(max(3, reps // 20)):
@@ -275,6 +280,11 @@ def controller_section(args: argparse.Namespace) -> list[Row]:
     tick = (time.perf_counter() - t0) / n
     return [
         ("Riccati solve, one footstep, h = 3", f"{np.median(ric) * 1e3:.3f}", "ms"),
+        (
+            "Riccati solve, one footstep, h = 3, the paper's weights (Q = I, no clip)",
+            f"{np.median(ric_paper) * 1e3:.3f}",
+            "ms",
+        ),
         ("linearisation + Riccati, one footstep", f"{np.median(full) * 1e3:.2f}", "ms"),
         ("replanning (planner, 4 steps, flat)", f"{np.median(plan_t) * 1e3:.1f}", "ms"),
         (
