@@ -44,7 +44,7 @@ from envs.physics import model
 from envs.physics.params import RobotParams
 from envs.physics.terrain import Terrain
 
-from .controller import ControllerConfig, TransverseController
+from .controller import PAPER_WEIGHTS, ControllerConfig, TransverseController
 from .gains import HorizonSolution, horizon_gains, step_models
 from .planner import GaitPlanner, PeriodicGait
 from .transverse import StepModel
@@ -72,8 +72,8 @@ NO_STATE = "no state"
 #: about four times the floor the unperturbed gait settles at (0.008 after 16 footsteps with the
 #: paper's weights; the 5 ms zero-order hold)
 DEFAULT_V_TOL = 0.03
-#: the feedback weights of the convergence metric: the paper's (the controller's class defaults)
-METRIC_WEIGHTS = {name: getattr(ControllerConfig(), name) for name in ("Q", "R", "Qj")}
+#: the feedback weights of the convergence metric: the paper's
+METRIC_WEIGHTS = PAPER_WEIGHTS
 
 
 @dataclass

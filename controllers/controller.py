@@ -96,6 +96,7 @@ from .transverse import StepModel
 
 __all__ = [
     "MODES",
+    "PAPER_WEIGHTS",
     "ControllerConfig",
     "PDController",
     "StepRecord",
@@ -307,6 +308,13 @@ class ControllerConfig:
     def to_dict(self) -> dict[str, Any]:
         """The fields as a plain dict (the inverse of :meth:`from_dict`)."""
         return asdict(self)
+
+
+#: the paper's feedback weights (``Q``, ``R``, ``Qj``: the class defaults), whatever a robot's
+#: preset sets: the basin's convergence metric and the bench's baseline solve
+PAPER_WEIGHTS: dict[str, Any] = {
+    name: getattr(ControllerConfig(), name) for name in ("Q", "R", "Qj")
+}
 
 
 class TransverseController:
