@@ -132,9 +132,14 @@ class StepOutputs(NamedTuple):
     @classmethod
     def allocate(cls, rows: int, columns: int, nodes: int) -> StepOutputs:
         """Uninitialised outputs for ``rows`` shapes, ``columns`` constraints, ``nodes`` nodes."""
-        per_row = np.empty((len(cls._fields) - 3, rows))
+        block = np.empty(rows * (columns + 2 * nodes + len(cls._fields) - 3))
+        n1, n2 = rows * columns, rows * (columns + nodes)
+        n3 = rows * (columns + 2 * nodes)
         return cls(
-            np.empty((rows, columns)), np.empty((rows, nodes)), np.empty((rows, nodes)), *per_row
+            block[:n1].reshape(rows, columns),
+            block[n1:n2].reshape(rows, nodes),
+            block[n2:n3].reshape(rows, nodes),
+            *block[n3:].reshape(-1, rows),
         )
 
 

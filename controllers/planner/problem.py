@@ -30,7 +30,6 @@ from dataclasses import dataclass
 from typing import Any, NamedTuple
 
 import numpy as np
-from scipy.optimize import minimize
 
 from envs.physics import model
 from envs.physics.params import RobotParams
@@ -42,6 +41,7 @@ from .config import PlannerConfig
 from .footholds import TerrainMap
 from .kernel import StepGrids, StepGround, StepOutputs, StepScalars, StepSettings
 from .plan import PeriodicGait
+from .slsqp import minimize_slsqp
 
 __all__ = [
     "CONSTRAINT_GROUPS",
@@ -589,10 +589,11 @@ class BatchProblem:
         X = _fd_points(x)
         rows = self.evaluate_many(X)
         h = np.diag(X[1:]) - x  # the steps actually taken
-        c0, g0 = rows[0][0], rows[0][1]
+        cost = np.array([r[0] for r in rows])
+        g = np.stack([r[1] for r in rows], axis=1)
         with np.errstate(all="ignore"):
-            dc = np.array([r[0] - c0 for r in rows[1:]]) / h
-            dg = np.stack([r[1] - g0 for r in rows[1:]], axis=1) / h
+            dc = (cost[1:] - cost[0]) / h
+            dg = (g[:, 1:] - g[:, :1]) / h
         # a point where the step model breaks down (NaN mapped to +-1e3) gives huge slopes
         for d in (dc, dg):
             d[np.isnan(d)] = 0.0
@@ -617,30 +618,21 @@ class BatchProblem:
         progress towards feasibility ends early (see ``_STALL_ITERATIONS``)."""
         hist: list[float] = []  # constraint violation after each iteration
 
-        def stop_when_stalled(intermediate_result):
-            g = self.get(intermediate_result.x)[1]
-            hist.append(float(violation(g)))
+        def stalled(x: np.ndarray) -> bool:
+            hist.append(float(violation(self.get(x)[1])))
             w = _STALL_WINDOW
-            if len(hist) >= _STALL_ITERATIONS and hist[-1] > _STALL_VIOLATION:
-                if min(hist[-w:]) > _STALL_GAIN * min(hist[:-w]):  # no progress to feasibility
-                    raise StopIteration
+            # still infeasible, and no progress towards feasibility of late
+            return (
+                len(hist) >= _STALL_ITERATIONS
+                and hist[-1] > _STALL_VIOLATION
+                and min(hist[-w:]) > _STALL_GAIN * min(hist[:-w])
+            )
 
-        res = minimize(
-            lambda x: self._with_jacobian_points(x)[0],
-            np.asarray(x0, dtype=np.float64),
-            callback=stop_when_stalled if stall else None,
-            jac=lambda x: self._jacobians(x)[0],
-            method="SLSQP",
-            constraints=[
-                {
-                    "type": "ineq",
-                    "fun": lambda x: self._with_jacobian_points(x)[1],
-                    "jac": lambda x: self._jacobians(x)[1],
-                }
-            ],
-            options={"maxiter": maxiter, "ftol": ftol},
-        )
-        return np.asarray(res.x)
+        def fun(x: np.ndarray) -> tuple[float, np.ndarray]:
+            c, g, _, _ = self._with_jacobian_points(x)
+            return c, g
+
+        return minimize_slsqp(fun, self._jacobians, x0, maxiter, ftol, stalled if stall else None)
 
 
 def _fd_points(x: np.ndarray) -> np.ndarray:
