@@ -94,6 +94,9 @@ class EpisodeResult:
         foot_error_max: largest ``|estimated - true|`` stance-foot x over the touchdowns [m]
             (the policy's ``stance_foot`` against ``info["stance_foot"]``); None for a policy
             that does not estimate it.
+        policy_error: the error the policy raised and survived by going limp (the reference
+            and PD policies never crash a rollout: ``diagnostics["error"]``), or None. A
+            failure after one is a defect of the policy, not of the walk.
     """
 
     seed: int
@@ -112,6 +115,7 @@ class EpisodeResult:
     V_ratio_max: float | None = None
     V_ratio_below_1: float | None = None
     foot_error_max: float | None = None
+    policy_error: str | None = None
 
 
 @dataclass
@@ -175,6 +179,7 @@ def summarize(episodes: Sequence[EpisodeResult], total_mass: float, g: float) ->
         "cost_of_transport": work / (total_mass * g * distance) if distance > 0 else None,
         "mean_return": float(np.mean([e.episode_return for e in episodes])),
         "failure_reasons": dict(Counter(e.failure for e in failed if e.failure)),
+        "policy_errors": sum(e.policy_error is not None for e in episodes),
         **ratio_summary(
             None if all(e.certificate is None for e in episodes) else _ratios(episodes)
         ),
@@ -265,6 +270,7 @@ def run_episode(
         certificate=cert,
         **ratio_summary(ratios),
         foot_error_max=foot_error,
+        policy_error=(getattr(policy, "diagnostics", None) or {}).get("error"),
     )
 
 

@@ -358,20 +358,26 @@ def planner_section(args: argparse.Namespace) -> list[Row]:
                 label += f", {cuts} replans cut by the budget)" if cuts else ")"
             value = f"{np.median(times) * 1e3:.1f}" if times else "-"
             rows.append((label, value, "ms"))
+    episodes = 2 if args.quick else 6
     for difficulty in (1.0, 2.0):
-        rows += _closed_loop_replanning(2 if args.quick else 6, difficulty)
+        rows += _closed_loop_replanning(episodes, difficulty)
+    # the planner's option, against the default above on the same courses
+    rows += _closed_loop_replanning(episodes, 1.0, {"gauss_newton_scaling": 1})
     return rows
 
 
-def _closed_loop_replanning(episodes: int, difficulty: float) -> list[Row]:
+def _closed_loop_replanning(
+    episodes: int, difficulty: float, planner: dict | None = None
+) -> list[Row]:
     """Replanning per footstep of the reference policy (sensors, observer, replanning at every
     touchdown) on ``CompassGaitRough-v0`` at ``difficulty``, evaluation seeds 1,001,000 on:
     median, 95th and 99th percentile over the footsteps of ``episodes`` episodes (the planner
     call, degradations included); the env steps per second of the whole loop (policy and env)
     against the bare env on the same courses under zero input, in the same run; and the time
-    of its online identification per fit (median, 95th percentile, largest)."""
+    of its online identification per fit (median, 95th percentile, largest). ``planner``:
+    changes to the robot's planner defaults (named in the rows)."""
     env = gym.make("roughwalk/CompassGaitRough-v0", difficulty=difficulty)
-    policy = ReferencePolicy(env)
+    policy = ReferencePolicy(env, planner=planner)
     times: list[float] = []
     fits: list[float] = []
     steps, t0 = 0, time.perf_counter()
@@ -402,6 +408,8 @@ def _closed_loop_replanning(episodes: int, difficulty: float) -> list[Row]:
     median, p95, p99 = np.percentile(times, [50, 95, 99]) * 1e3 if times else (np.nan,) * 3
     f50, f95, fmax = (*np.percentile(fits, [50, 95]), max(fits)) if fits else (np.nan,) * 3
     where = f"reference policy, CompassGaitRough-v0 difficulty {difficulty:g} ({episodes} episodes)"
+    if planner:
+        where += ", planner " + ", ".join(f"{k}={v}" for k, v in planner.items())
     return [
         (
             f"replanning per footstep in closed loop (median / p95 / p99): {where}",

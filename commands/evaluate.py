@@ -389,6 +389,12 @@ def run(args: argparse.Namespace) -> int:
     line = certificate_line(ev)
     if line:
         print(line)
+    errors = [e for e in ev.episodes if e.policy_error is not None]
+    if errors:
+        print(
+            f"warning: the policy raised an error and went limp in {len(errors)} of "
+            f"{len(ev.episodes)} episodes (seed {errors[0].seed}: {errors[0].policy_error})"
+        )
     if args.json:
         write_json([ev], args.json)
     if args.csv:

@@ -101,6 +101,8 @@ def cell_summary(cell: Cell, records: Sequence[dict[str, Any]], seed: int = 0) -
     out["failure_reasons"] = dict(
         sorted(Counter(r["failure"] for r in records if not r["success"]).items())
     )
+    # episodes in which the policy raised an error and went limp (a defect, see EpisodeResult)
+    out["policy_errors"] = sum(r.get("policy_error") is not None for r in records)
     return out
 
 

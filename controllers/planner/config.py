@@ -136,6 +136,12 @@ class PlannerConfig:
             the post-impact speeds they lead to (slowest to fastest).
         beam_evaluations: step evaluations one beam search may spend (besides the
             depth-first search's ``max_evaluations``; a deterministic bound).
+        gauss_newton_scaling: 1: each SLSQP solve of a step (or a pair) runs in coordinates
+            in which the Gauss-Newton model of its cost (a sum of squares) at the start point
+            is the identity, SLSQP's first Hessian model, up to a floor on its flattest
+            directions (about half the iterations; the optima are the same within the
+            solver's tolerance, the plans not bit for bit); 0 (default): in the free
+            coefficients themselves.
 
     The swing-foot geometry is the robot's (:attr:`envs.physics.RobotParams.retract`,
     :attr:`~envs.physics.RobotParams.arm_distance`, the simulator's rule): the planned swing
@@ -195,6 +201,7 @@ class PlannerConfig:
     beam_footholds: int = 8
     beam_speeds: int = 5
     beam_evaluations: int = 40000
+    gauss_newton_scaling: int = 0
 
     def __new__(cls, *args: Any, **kwargs: Any) -> PlannerConfig:
         """Reject the settings that moved to :class:`envs.physics.RobotParams`, naming the
@@ -224,6 +231,7 @@ class PlannerConfig:
             "beam_footholds": 1,
             "beam_speeds": 0,
             "beam_evaluations": 1,
+            "gauss_newton_scaling": 0,
         }
         for name, lo in ints.items():
             v = getattr(self, name)
@@ -260,8 +268,9 @@ class PlannerConfig:
             raise ValueError(
                 f"PlannerConfig.relaxed_margin = {self.relaxed_margin}; allowed: [0, 1]"
             )
-        if self.pairs_first > 1:
-            raise ValueError(f"PlannerConfig.pairs_first = {self.pairs_first}; allowed: 0 or 1")
+        for name in ("pairs_first", "gauss_newton_scaling"):
+            if getattr(self, name) > 1:
+                raise ValueError(f"PlannerConfig.{name} = {getattr(self, name)}; allowed: 0 or 1")
         if self.lookahead > 2:
             raise ValueError(f"PlannerConfig.lookahead = {self.lookahead}; allowed: 0, 1 or 2")
         self.rules()  # validates the foothold fields

@@ -40,6 +40,7 @@ __all__ = [
     "evaluate_steps",
     "pack",
     "packed_size",
+    "residual_count",
 ]
 
 
@@ -128,19 +129,30 @@ class StepOutputs(NamedTuple):
     arm_theta: np.ndarray  # (B,) phase at which the swing foot is armed [rad] (NaN: never)
     thetadot_plus: np.ndarray  # (B,) start theta_dot [rad/s]
     gain: np.ndarray  # (B,) step-to-step gain of theta_dot^2 (periodic gait; else NaN)
+    residuals: np.ndarray  # (B, R) the cost's terms: cost = sum of their squares
 
     @classmethod
-    def allocate(cls, rows: int, columns: int, nodes: int) -> StepOutputs:
-        """Uninitialised outputs for ``rows`` shapes, ``columns`` constraints, ``nodes`` nodes."""
-        block = np.empty(rows * (columns + 2 * nodes + len(cls._fields) - 3))
+    def allocate(cls, rows: int, columns: int, nodes: int, order: int) -> StepOutputs:
+        """Uninitialised outputs for ``rows`` shapes, ``columns`` constraints, ``nodes`` nodes
+        and Bezier order ``order``."""
+        per_row = len(cls._fields) - 4
+        block = np.empty(rows * (columns + 2 * nodes + per_row))
         n1, n2 = rows * columns, rows * (columns + nodes)
         n3 = rows * (columns + 2 * nodes)
         return cls(
             block[:n1].reshape(rows, columns),
             block[n1:n2].reshape(rows, nodes),
             block[n2:n3].reshape(rows, nodes),
-            *block[n3:].reshape(-1, rows),
+            *block[n3:].reshape(per_row, rows),
+            np.zeros((rows, residual_count(nodes, order))),
         )
+
+
+def residual_count(nodes: int, order: int) -> int:
+    """Length of a row of :attr:`StepOutputs.residuals`: the speed term, then the effort on
+    each of ``nodes`` nodes (periodic gait) or the end speed, the post-impact slope and the
+    ``order - 2`` shape terms (steps)."""
+    return 1 + max(nodes, order + 1)
 
 
 _jit = njit(cache=True, error_model="numpy")
@@ -338,22 +350,28 @@ def evaluate_steps(
         v = (step.foot_x - xs) / T
         vt = step.v_target
         cost = cfg.w_speed * ((v - vt) / vt) ** 2
+        res = out.residuals[b]  # the same terms, square roots of their weights inside
+        res[0] = math.sqrt(cfg.w_speed) * ((v - vt) / vt)
         if not use_ref:
             su = 0.0
             for k in range(nn):
                 su += (U[b, k] / cfg.u_max) ** 2
+                res[1 + k] = math.sqrt(cfg.w_torque / nn) * (U[b, k] / cfg.u_max)
             cost += cfg.w_torque * su / nn
         else:
             ws = step.wscale
             dr = step.delta_ref * step.thetadot_minus_ref
             cost += ws * cfg.w_end * ((delta * thd[e] - dr) / dr) ** 2
             cost += ws * cfg.w_slope * (slope_plus - step.slope_ref) ** 2
+            res[1] = math.sqrt(ws * cfg.w_end) * ((delta * thd[e] - dr) / dr)
+            res[2] = math.sqrt(ws * cfg.w_slope) * (slope_plus - step.slope_ref)
             chord = a[b, m] - a[b, 0]
             den = max(abs(chord), 1e-6)
             sh = 0.0
             for i in range(2, m):
                 rel = (a[b, i] - chord_coefficients(a[b, 0], a[b, m], i, m)) / den
                 sh += (rel - shape_ref[i]) ** 2
+                res[1 + i] = math.sqrt(ws * cfg.w_shape) * (rel - shape_ref[i])
             cost += ws * cfg.w_shape * sh
         out.cost[b] = cost
         out.duration[b] = T

@@ -71,6 +71,10 @@ _PACK_BLOCK = 8  # long constraint groups reach SLSQP as minima over blocks of g
 _STALL_ITERATIONS, _STALL_WINDOW, _STALL_GAIN, _STALL_VIOLATION = 25, 5, 0.95, 1e-4
 _FD_STEP = math.sqrt(np.finfo(float).eps)  # forward-difference step of the Jacobians
 _PROBLEMS_KEPT = 16  # step problems whose kernel data a StepEvaluator keeps
+# the scaled solves' eigenvalue floor, relative to the largest: the cost is nearly flat along
+# some shape directions, and fully whitened solves wander along them, away from the warm start
+# (on 200 validation courses at difficulty 1 a floor of 1e-6 tripped on 7 the default walked)
+_SCALING_FLOOR = 0.1
 #: least phase range ``theta- - theta+`` of a step to a candidate foothold [rad]; footholds
 #: closer are not tried
 MIN_PHASE_SPAN = 0.05
@@ -429,7 +433,7 @@ class StepEvaluator:
             thd_plus = np.full(nb, float(fx.thetadot_plus))
         else:
             thd_plus = np.ascontiguousarray(thd_in, dtype=np.float64)
-        out = StepOutputs.allocate(nb, int(layout.offsets[-1]), grids.nodes.size)
+        out = StepOutputs.allocate(nb, int(layout.offsets[-1]), grids.nodes.size, self.cfg.order)
         kernel.evaluate_steps(
             self.P,
             a,
@@ -461,6 +465,7 @@ class StepEvaluator:
             "arm_theta": out.arm_theta,
             "thetadot_plus": out.thetadot_plus,
             "gain": out.gain,
+            "residuals": out.residuals,
         }
 
 
@@ -544,16 +549,20 @@ class BatchProblem:
     index). The Jacobians are forward differences whose ``k`` perturbed points are evaluated in
     one batched call (the same derivatives SLSQP would take by itself, at a fraction of the cost).
     With a :class:`SearchBudget` every evaluation is accounted; once it is spent, any further
-    evaluation raises :class:`BudgetExhausted`.
+    evaluation raises :class:`BudgetExhausted`. ``residuals(payload)`` (optional) gives the
+    cost's terms of a batch, ``(B, R)`` with ``cost = sum(r^2)`` row by row: the Gauss-Newton
+    model of :meth:`minimize` with ``scaled``.
     """
 
     def __init__(
         self,
         fn: Callable[[np.ndarray], tuple[np.ndarray, np.ndarray, Any]],
         budget: SearchBudget | None = None,
+        residuals: Callable[[Any], np.ndarray] | None = None,
     ):
         self.fn = fn
         self.budget = budget
+        self.residuals = residuals
         self.cache: dict[bytes, tuple[float, np.ndarray, Any, int]] = {}
         self._jac: dict[bytes, tuple[np.ndarray, np.ndarray]] = {}
 
@@ -611,12 +620,41 @@ class BatchProblem:
             self._fill(_fd_points(x))
         return self.cache[key]
 
+    def scaling(self, x0: np.ndarray) -> np.ndarray | None:
+        """``T`` such that the Gauss-Newton model of the cost at ``x0``, ``2 J^T J`` with ``J``
+        the residuals' forward-difference Jacobian, is the identity in ``z`` (``x = x0 + T
+        z``): ``T = V diag(w)^(-1/2) V^T`` from its eigen-decomposition, eigenvalues floored
+        at :data:`_SCALING_FLOOR` of the largest. None without residuals or where the model is
+        not finite or vanishes."""
+        if self.residuals is None:
+            return None
+        x0 = np.ascontiguousarray(x0, dtype=np.float64)
+        X = _fd_points(x0)
+        rows = self.evaluate_many(X)
+        R = np.stack([self.residuals(p)[r] for _, _, p, r in rows])
+        with np.errstate(all="ignore"):
+            J = (R[1:] - R[0]).T / (np.diag(X[1:]) - x0)
+            H = 2.0 * J.T @ J
+        if not np.all(np.isfinite(H)):
+            return None
+        w, V = np.linalg.eigh(H)
+        if not w[-1] > 0:
+            return None
+        return (V / np.sqrt(np.maximum(w, _SCALING_FLOOR * w[-1]))) @ V.T
+
     def minimize(
-        self, x0: np.ndarray, maxiter: int, ftol: float, stall: bool = False
+        self,
+        x0: np.ndarray,
+        maxiter: int,
+        ftol: float,
+        stall: bool = False,
+        scaled: bool = False,
     ) -> np.ndarray:
         """SLSQP from ``x0``; returns the final point. With ``stall``, a run that stops making
-        progress towards feasibility ends early (see ``_STALL_ITERATIONS``)."""
+        progress towards feasibility ends early (see ``_STALL_ITERATIONS``). With ``scaled``
+        (and residuals), in the coordinates of :meth:`scaling` at ``x0``."""
         hist: list[float] = []  # constraint violation after each iteration
+        T = self.scaling(x0) if scaled else None
 
         def stalled(x: np.ndarray) -> bool:
             hist.append(float(violation(self.get(x)[1])))
@@ -632,7 +670,26 @@ class BatchProblem:
             c, g, _, _ = self._with_jacobian_points(x)
             return c, g
 
-        return minimize_slsqp(fun, self._jacobians, x0, maxiter, ftol, stalled if stall else None)
+        if T is None:
+            return minimize_slsqp(
+                fun, self._jacobians, x0, maxiter, ftol, stalled if stall else None
+            )
+        xs = np.array(x0, dtype=np.float64)
+
+        def fun_z(z: np.ndarray) -> tuple[float, np.ndarray]:
+            return fun(xs + T @ z)
+
+        def jac_z(z: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+            dc, dg = self._jacobians(xs + T @ z)
+            return T.T @ dc, dg @ T
+
+        def stalled_z(z: np.ndarray) -> bool:
+            return stalled(xs + T @ z)
+
+        z = minimize_slsqp(
+            fun_z, jac_z, np.zeros_like(xs), maxiter, ftol, stalled_z if stall else None
+        )
+        return xs + T @ z
 
 
 def _fd_points(x: np.ndarray) -> np.ndarray:

@@ -405,9 +405,10 @@ class StepSearch:
             e1 = sm.evaluate_batch(fx, X[:, :n])
             thd2 = e1["delta"] * e1["thetadot_minus"]
             e2 = sm.evaluate_batch(fx2, X[:, n:], slope=e1["slope_plus"], thetadot_plus=thd2)
+            e1["pair_residuals"] = np.concatenate([e1["residuals"], e2["residuals"]], axis=1)
             return e1["cost"] + e2["cost"], np.concatenate([e1["g"], e2["g"]], axis=1), e1
 
-        prob = BatchProblem(batch, self.evaluations)
+        prob = BatchProblem(batch, self.evaluations, lambda ev: ev["pair_residuals"])
         key = self._problem_key(fx, fx2)
         if key in memo.failed:
             return memo.failed[key], False
@@ -416,7 +417,13 @@ class StepSearch:
             _, _, e1, r = prob.get(x)
             return batch_row(e1, r), True
         self.fresh = True
-        x = prob.minimize(np.concatenate([x0, x02]), self.config.max_iter, _FTOL, self.struggling)
+        x = prob.minimize(
+            np.concatenate([x0, x02]),
+            self.config.max_iter,
+            _FTOL,
+            self.struggling,
+            bool(self.config.gauss_newton_scaling),
+        )
         _, g, e1, r = prob.get(x)
         ok = bool(np.min(g) >= -1e-7)
         if ok:
@@ -452,10 +459,16 @@ class StepSearch:
             ev = sm.evaluate_batch(fx, X)
             return ev["cost"], ev["g"], ev
 
-        prob = BatchProblem(batch, self.evaluations)
+        prob = BatchProblem(batch, self.evaluations, lambda ev: ev["residuals"])
 
         def run(xs):
-            x = prob.minimize(xs, self.config.max_iter, _FTOL, self.struggling)
+            x = prob.minimize(
+                xs,
+                self.config.max_iter,
+                _FTOL,
+                self.struggling,
+                bool(self.config.gauss_newton_scaling),
+            )
             _, g, ev, r = prob.get(x)
             return batch_row(ev, r), bool(np.min(g) >= -1e-7)
 

@@ -294,3 +294,30 @@ def test_episodes_record_the_policys_foothold_error():
     assert located.footsteps >= 9
     assert located.foot_error_max < 0.025 and dead.foot_error_max > 0.05  # m
     assert run_episode(env, ZeroPolicy(env.action_space), seed).foot_error_max is None
+
+
+def test_a_policy_error_is_recorded_not_hidden_in_a_failure(capsys, monkeypatch):
+    """The reference policy survives an error inside its controller by going limp (a rollout
+    never crashes); the episode names the error, the summary counts it and ``roughwalk
+    evaluate`` warns, so a defect does not pass for a trip."""
+    from agents.policies import make_baseline_policy
+    from commands.cli import main
+    from controllers.reference import ReferencePolicy
+
+    env = gym.make("roughwalk/CompassGaitRough-v0", difficulty=1.0)
+    seed = 1_000_004
+    policy = make_baseline_policy("reference", env)
+    fine = run_episode(env, policy, seed)
+    assert fine.success and fine.policy_error is None
+
+    def broken(self, q, leg):
+        raise IndexError("tuple index out of range")
+
+    monkeypatch.setattr(ReferencePolicy, "_tick", broken)
+    bad = run_episode(env, policy, seed)
+    assert not bad.success and bad.policy_error == "IndexError: tuple index out of range"
+    mass, g = env.unwrapped.params.total_mass, env.unwrapped.params.g
+    s = Evaluation("reference", FLAT, {}, [fine, bad], mass, g).summary
+    assert s["policy_errors"] == 1
+    assert main(["evaluate", "--policy", "reference", "--env", FLAT, "--episodes", "1"]) == 0
+    assert "went limp in 1 of 1 episodes" in capsys.readouterr().out

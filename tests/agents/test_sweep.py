@@ -53,6 +53,8 @@ def test_records_and_summary(small_sweep):
     assert passive["success_rate_ci"] == pytest.approx([0.0, 0.5615], abs=1e-4)
     pd = cells["pd/rough[difficulty=1]"]
     assert pd["success_rate"] == 1.0 and pd["failure_reasons"] == {}
+    assert all("policy_error" in r for r in records)  # each episode says if its policy broke
+    assert pd["policy_errors"] == passive["policy_errors"] == 0
     lo, hi = pd["mean_distance_ci"]
     assert lo <= pd["mean_distance"] <= hi
     # the cost of transport is total work over total m g distance, as evaluate reports it

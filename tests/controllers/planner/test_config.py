@@ -17,6 +17,10 @@ def test_bad_config_raises():
         PlannerConfig(step_min=0.3, step_length=0.2)
     with pytest.raises(ValueError, match=r"pairs_first = 2; allowed: 0 or 1"):
         PlannerConfig(pairs_first=2)
+    with pytest.raises(ValueError, match=r"gauss_newton_scaling = 2; allowed: 0 or 1"):
+        PlannerConfig(gauss_newton_scaling=2)
+    with pytest.raises(ValueError, match=r"gauss_newton_scaling = 0.5; allowed: integer >= 0"):
+        PlannerConfig(gauss_newton_scaling=0.5)
 
 
 @pytest.mark.parametrize("key", ["retract", "arm_distance"])

@@ -51,6 +51,35 @@ def test_batched_step_evaluation_matches_single_points(planners):
     np.testing.assert_allclose(sm.evaluate(fx, st.coeffs[2:-1])["a"], st.coeffs, atol=1e-12)
 
 
+@pytest.mark.parametrize("periodic", [False, True])
+def test_the_cost_is_the_sum_of_the_squared_residuals(planners, periodic):
+    """The kernel's residuals (the Gauss-Newton model's terms) square and sum to its cost, for
+    the periodic gait's effort cost and for a step's pull towards the gait."""
+    pl = planners["paper"]
+    g = pl.periodic_gait()
+    st = g.step
+    sm = StepEvaluator(pl.params, pl.config, TerrainMap(CASES["paper"]["blocks_high"]))
+    if not periodic:
+        sm.ref = gait_reference(g)
+    fx = FixedStep(
+        st.theta_plus,
+        st.coeffs[0],
+        st.slope_plus,
+        st.thetadot_plus,
+        (0.25, 0.0),
+        (0.25 + 0.9 * st.step_length, 0.0),
+        st.theta_minus,
+        st.coeffs[-1],
+    )
+    x = st.coeffs[2:-1] + 0.03 * np.random.default_rng(1).standard_normal((5, st.coeffs.size - 3))
+    ev = sm.evaluate_batch(fx, x, periodic=periodic)
+    assert np.all(ev["cost"] > 0)
+    np.testing.assert_allclose(np.sum(ev["residuals"] ** 2, axis=1), ev["cost"], rtol=1e-12)
+    used = np.any(ev["residuals"] != 0, axis=0)
+    # the speed term, then 33 effort terms or end speed, slope and the order - 2 shape terms
+    assert used.sum() == (1 + sm.grids.nodes.size if periodic else 3 + pl.config.order - 2)
+
+
 def test_constraint_layout_follows_the_table():
     """Each group of the table gets a block of columns of its size, in the table's order (the
     periodic-gait group last and only for the periodic gait); the kernel's columns by name are
@@ -81,8 +110,8 @@ def test_the_kernel_writes_every_constraint_column(planners, monkeypatch, period
     group, with vertical faces between the stance foot and the foothold."""
     allocate = StepOutputs.allocate.__func__
 
-    def nan_filled(cls, rows, columns, nodes):
-        out = allocate(cls, rows, columns, nodes)
+    def nan_filled(cls, rows, columns, nodes, order):
+        out = allocate(cls, rows, columns, nodes, order)
         for a in out:
             a.fill(np.nan)
         return out
