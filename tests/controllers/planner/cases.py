@@ -1,6 +1,8 @@
 """Terrain cases of the planner tests, per robot."""
 
 from configs import CONFIG_DIR
+from controllers.planner import TerrainMap
+from controllers.planner.problem import FixedStep, StepEvaluator, gait_reference
 from envs.physics.terrain import Terrain
 
 PAPER_STAIRS = Terrain.from_yaml(CONFIG_DIR / "terrains" / "paper_stairs.yaml")
@@ -24,3 +26,28 @@ CASES = {
 }
 HORIZON = {"paper": 7, "classic": 7}
 ALL_CASES = [(r, t) for r in CASES for t in CASES[r]]
+
+
+def gait_step(planner, terrain, stance=(0.25, 0.0), length=None, rise=0.0, ref=True):
+    """A step problem shaped like ``planner``'s periodic gait step on ``terrain``: from the
+    stance foot ``stance`` [m] to the foothold ``length`` [m] ahead (the gait's step length by
+    default) and ``rise`` [m] up, with the gait's start and end phases. Returns the evaluator
+    (pulling towards the gait with ``ref``, else the periodic gait's effort cost), the
+    :class:`FixedStep` and the gait's step."""
+    g = planner.periodic_gait()
+    st = g.step
+    sm = StepEvaluator(planner.params, planner.config, TerrainMap(terrain))
+    if ref:
+        sm.ref = gait_reference(g)
+    length = st.step_length if length is None else length
+    fx = FixedStep(
+        st.theta_plus,
+        st.coeffs[0],
+        st.slope_plus,
+        st.thetadot_plus,
+        stance,
+        (stance[0] + length, stance[1] + rise),
+        st.theta_minus,
+        st.coeffs[-1],
+    )
+    return sm, fx, st

@@ -18,28 +18,14 @@ from controllers.planner.problem import (
     worst_violation,
 )
 
-from .cases import CASES
+from .cases import CASES, gait_step
 
 
 def test_batched_step_evaluation_matches_single_points(planners):
     """The vectorised evaluation of many candidate shapes (used for the SLSQP Jacobians and the
     global search) gives, row by row, the constraints and cost of evaluating each alone."""
-    pl = planners["paper"]
-    g = pl.periodic_gait()
-    st = g.step
-    sm = StepEvaluator(pl.params, pl.config, TerrainMap(CASES["paper"]["blocks_high"]))
-    sm.ref = gait_reference(g)
+    sm, fx, st = gait_step(planners["paper"], CASES["paper"]["blocks_high"])
     assert sm.ref.delta == st.delta
-    fx = FixedStep(
-        st.theta_plus,
-        st.coeffs[0],
-        st.slope_plus,
-        st.thetadot_plus,
-        (0.25, 0.0),
-        (0.25 + st.step_length, 0.0),
-        st.theta_minus,
-        st.coeffs[-1],
-    )
     x = st.coeffs[2:-1] + 0.05 * np.random.default_rng(0).standard_normal((6, st.coeffs.size - 3))
     batch = sm.evaluate_batch(fx, x)
     for i in range(len(x)):
@@ -56,20 +42,9 @@ def test_the_cost_is_the_sum_of_the_squared_residuals(planners, periodic):
     """The kernel's residuals (the Gauss-Newton model's terms) square and sum to its cost, for
     the periodic gait's effort cost and for a step's pull towards the gait."""
     pl = planners["paper"]
-    g = pl.periodic_gait()
-    st = g.step
-    sm = StepEvaluator(pl.params, pl.config, TerrainMap(CASES["paper"]["blocks_high"]))
-    if not periodic:
-        sm.ref = gait_reference(g)
-    fx = FixedStep(
-        st.theta_plus,
-        st.coeffs[0],
-        st.slope_plus,
-        st.thetadot_plus,
-        (0.25, 0.0),
-        (0.25 + 0.9 * st.step_length, 0.0),
-        st.theta_minus,
-        st.coeffs[-1],
+    st = pl.periodic_gait().step
+    sm, fx, st = gait_step(
+        pl, CASES["paper"]["blocks_high"], length=0.9 * st.step_length, ref=not periodic
     )
     x = st.coeffs[2:-1] + 0.03 * np.random.default_rng(1).standard_normal((5, st.coeffs.size - 3))
     ev = sm.evaluate_batch(fx, x, periodic=periodic)

@@ -6,35 +6,20 @@ import numpy as np
 import pytest
 
 import envs  # noqa: F401  (registers the ids)
-from controllers.planner import GaitPlanner, TerrainMap
+from controllers.planner import GaitPlanner
 from controllers.planner.problem import (
     _SCALING_FLOOR,
     BatchProblem,
-    FixedStep,
-    StepEvaluator,
-    gait_reference,
 )
 from controllers.reference import ReferencePolicy
 
-from .cases import CASES, HORIZON
+from .cases import CASES, HORIZON, gait_step
 from .test_plan import OPEN_LOOP_STEPS, rollout
 
 
 def _step_problem(pl, shorter: float):
-    g = pl.periodic_gait()
-    st = g.step
-    sm = StepEvaluator(pl.params, pl.config, TerrainMap(CASES["paper"]["flat"]))
-    sm.ref = gait_reference(g)
-    fx = FixedStep(
-        st.theta_plus,
-        st.coeffs[0],
-        st.slope_plus,
-        st.thetadot_plus,
-        (0.25, 0.0),
-        (0.25 + shorter * st.step_length, 0.0),
-        st.theta_minus,
-        st.coeffs[-1],
-    )
+    length = shorter * pl.periodic_gait().step.step_length
+    sm, fx, st = gait_step(pl, CASES["paper"]["flat"], length=length)
     calls = []
 
     def fn(X):

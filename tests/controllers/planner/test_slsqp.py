@@ -5,11 +5,11 @@ import numpy as np
 import pytest
 from scipy.optimize import minimize
 
-from controllers.planner import TerrainMap, slsqp
-from controllers.planner.problem import BatchProblem, FixedStep, StepEvaluator, gait_reference
+from controllers.planner import slsqp
+from controllers.planner.problem import BatchProblem
 from controllers.planner.slsqp import minimize_slsqp
 
-from .cases import CASES
+from .cases import CASES, gait_step
 
 
 class _Recorder:
@@ -110,20 +110,8 @@ def test_a_step_problem_solves_as_scipy_solves_it(planners):
     """The planner's batched adaptor: the direct driver lands on scipy's point exactly and
     evaluates the same points (the search budget's count is unchanged)."""
     pl = planners["paper"]
-    g = pl.periodic_gait()
-    st = g.step
-    sm = StepEvaluator(pl.params, pl.config, TerrainMap(CASES["paper"]["blocks_high"]))
-    sm.ref = gait_reference(g)
-    fx = FixedStep(
-        st.theta_plus,
-        st.coeffs[0],
-        st.slope_plus,
-        st.thetadot_plus,
-        (0.25, 0.0),
-        (0.25 + 0.8 * st.step_length, 0.0),
-        st.theta_minus,
-        st.coeffs[-1],
-    )
+    length = 0.8 * pl.periodic_gait().step.step_length
+    sm, fx, st = gait_step(pl, CASES["paper"]["blocks_high"], length=length)
 
     def fn(X):
         ev = sm.evaluate_batch(fx, X)
