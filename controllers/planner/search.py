@@ -405,10 +405,13 @@ class StepSearch:
             e1 = sm.evaluate_batch(fx, X[:, :n])
             thd2 = e1["delta"] * e1["thetadot_minus"]
             e2 = sm.evaluate_batch(fx2, X[:, n:], slope=e1["slope_plus"], thetadot_plus=thd2)
-            e1["pair_residuals"] = np.concatenate([e1["residuals"], e2["residuals"]], axis=1)
+            e1["next_residuals"] = e2["residuals"]  # the pair's cost terms: both steps'
             return e1["cost"] + e2["cost"], np.concatenate([e1["g"], e2["g"]], axis=1), e1
 
-        prob = BatchProblem(batch, self.evaluations, lambda ev: ev["pair_residuals"])
+        def residuals(ev):
+            return np.concatenate([ev["residuals"], ev["next_residuals"]], axis=1)
+
+        prob = BatchProblem(batch, self.evaluations, residuals)
         key = self._problem_key(fx, fx2)
         if key in memo.failed:
             return memo.failed[key], False
