@@ -453,9 +453,10 @@ def test_controller_defaults_per_robot(tmp_path, monkeypatch):
         ControllerConfig.for_robot("paper")
 
 
-def tube_loop(z0, steps, **config):
+def tube_loop(z0, steps, pushes=(), **config):
     """Plan from the nominal flat-ground start, start ``z0`` off it in transverse coordinates,
-    replan at every footstep with ``config``; returns (failure, records)."""
+    replan at every footstep with ``config``, push the hip by ``dv`` [m/s] at each ``(t, dv)``
+    of ``pushes``; returns (failure, records)."""
     ctrl = TransverseController("paper", TERRAINS["flat"], config)
     gait = ctrl.planner.periodic_gait()
     ctrl.reset(gait.q, gait.qd)
@@ -463,7 +464,10 @@ def tube_loop(z0, steps, **config):
     sim = Simulator(ctrl.robot, ctrl.terrain, 1, dt=DT)
     sim.reset(x0[:2], x0[2:])
     b = model.input_gain(ctrl.P)
+    todo = sorted(pushes)
     while len(ctrl.records) <= steps:
+        while todo and sim.t[0] >= todo[0][0]:
+            sim.push_hip(0, todo.pop(0)[1])
         ev = sim.step(b * ctrl.control(sim.q[0].copy(), sim.qd[0].copy()))
         if ev.status[0]:
             return sim.failure(0), ctrl.records
@@ -492,6 +496,18 @@ def test_replanning_within_a_step_rescues_a_start_slower_than_planned(deficit, w
     assert recs[0].retargets == 1 and "left the plan's tube" in recs[0].reason
     assert recs[0].fallback.startswith("relaxed: ")  # the tube replan relaxes at once
     assert [r.retargets for r in recs[1:]] == [0, 0, 0]  # on the plan again after the impact
+
+
+@pytest.mark.parametrize("replans", [1, 2])
+def test_a_step_is_replanned_within_at_most_tube_replans_times(replans):
+    """Two backward hip pushes of 0.06 m/s in the first step (at 0.03 s and 0.15 s): the first
+    takes the state out of the plan's tube, the second out of the replanned one; a step is
+    replanned within as often as ``tube_replans`` allows, and the steps after it not at all."""
+    _, recs = tube_loop((0.0, 0.0, 0.0), 3, pushes=[(0.03, -0.06), (0.15, -0.06)],
+                        tube_replans=replans)  # fmt: skip
+    assert recs[0].retargets == replans
+    assert "left the plan's tube" in recs[0].reason
+    assert all(r.retargets == 0 for r in recs[1:])
 
 
 def test_the_tube_is_left_alone_in_fixed_plan_mode_and_when_switched_off():
