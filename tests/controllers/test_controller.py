@@ -503,8 +503,8 @@ def test_a_step_is_replanned_within_at_most_tube_replans_times(replans):
     """Two backward hip pushes of 0.06 m/s in the first step (at 0.03 s and 0.15 s): the first
     takes the state out of the plan's tube, the second out of the replanned one; a step is
     replanned within as often as ``tube_replans`` allows, and the steps after it not at all."""
-    _, recs = tube_loop((0.0, 0.0, 0.0), 3, pushes=[(0.03, -0.06), (0.15, -0.06)],
-                        tube_replans=replans)  # fmt: skip
+    pushes = [(0.03, -0.06), (0.15, -0.06)]
+    _, recs = tube_loop((0.0, 0.0, 0.0), 3, pushes=pushes, tube_replans=replans)
     assert recs[0].retargets == replans
     assert "left the plan's tube" in recs[0].reason
     assert all(r.retargets == 0 for r in recs[1:])
