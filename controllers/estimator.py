@@ -164,6 +164,8 @@ class SensorStateEstimator:
     def reset(self) -> None:
         """Forget the episode (call after ``env.reset``); the next update starts a new one."""
         self.started = False
+        # no estimate until the first update: what a new estimator holds, not the last episode's
+        self.observer.x[:] = 0.0
         self.stance_leg = 0
         self.stance_foot = (0.0, 0.0)
         self.t = 0.0

@@ -49,6 +49,34 @@ def test_a_zero_action_is_the_reference_controller_exactly():
     assert steps == info2["footsteps"] + 1  # one decision per stance, the last one cut short
 
 
+def walk(env, seed, action):
+    """Observations and rewards of one episode from ``reset(seed=seed)``, ``action`` at every
+    footstep."""
+    obs, _ = env.reset(seed=seed)
+    seen, done = [obs], False
+    while not done:
+        obs, r, term, trunc, _ = env.step(action)
+        seen += [obs, np.float64(r)]
+        done = term or trunc
+    return seen
+
+
+def test_an_episode_does_not_depend_on_the_episode_before():
+    """The first observation after a reset holds no estimate of the last episode (the
+    estimator starts at the first tick, as a new wrapper's does), so an episode is the same
+    after another one as on a new wrapper: evaluations split over workers give the same
+    records."""
+    action = np.full(len(DEFAULT_ADJUST), 0.5)
+    fresh = walk(FootstepWrapper(gym.make(FLAT)), 1000001, action)
+    env = FootstepWrapper(gym.make(FLAT))
+    walk(env, 1000000, action)
+    after = walk(env, 1000001, action)
+    assert len(after) == len(fresh)
+    for a, b in zip(after, fresh, strict=True):
+        np.testing.assert_array_equal(a, b)
+    assert not np.any(fresh[0][-5:])  # the estimate's entries before the first tick
+
+
 def test_the_action_moves_the_next_footholds_and_the_speed_aimed_at():
     """On level ground ``foothold_shift`` at +1 plans the next footholds 3 cm further out
     each, at -1 3 cm nearer; ``target_speed`` is the configured one plus its half-range."""
