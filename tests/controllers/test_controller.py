@@ -490,8 +490,9 @@ def test_replanning_within_a_step_rescues_a_start_slower_than_planned(deficit, w
     failure, recs = tube_loop(z0, 4, tube_replans=0, **fields)
     # the paper's weights let the stance foot slip, the stiff default's clip holds it: a trip
     assert failure == ("slip" if weights == "paper" else "trip") and recs[0].retargets == 0
-    failure, recs = tube_loop(z0, 4, **fields)  # tube_energy 0.25, one replan per step
+    failure, recs = tube_loop(z0, 4, **fields)  # the paper robot's: up to two replans a step
     assert ControllerConfig().tube_energy == 0.25 and ControllerConfig().tube_replans == 1
+    assert ControllerConfig.for_robot("paper").tube_replans == 2
     assert failure is None and len(recs) == 4
     assert recs[0].retargets == 1 and "left the plan's tube" in recs[0].reason
     assert recs[0].fallback.startswith("relaxed: ")  # the tube replan relaxes at once
