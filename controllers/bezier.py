@@ -24,6 +24,7 @@ __all__ = [
     "bezier_derivative_coeffs",
     "bezier_on_basis",
     "chord_coefficients",
+    "second_coeff",
 ]
 
 
@@ -87,6 +88,26 @@ def chord_coefficients(
     first to the last coefficient of an order-``M`` polynomial, at the indices ``k`` (entry by
     entry); a shape is measured relative to it."""
     return a0 + (a_last - a0) * k / order
+
+
+@njit(cache=True, error_model="numpy")
+def second_coeff(
+    a0: float, slope: np.ndarray | float, theta_plus: float, theta_minus: float, order: int
+) -> np.ndarray | float:
+    """``a_1`` that gives ``phi'(theta_plus) = slope`` (impact invariance); compiled, entry by
+    entry for an array ``slope``.
+
+    Args:
+        a0: first coefficient ``a_0`` [rad].
+        slope: wanted ``d phi / d theta`` at ``theta_plus`` [-].
+        theta_plus: phase at the start of the step [rad].
+        theta_minus: phase at the planned impact [rad].
+        order: polynomial order ``M``.
+
+    Returns:
+        The coefficient ``a_1`` [rad].
+    """
+    return a0 + slope * (theta_minus - theta_plus) / order
 
 
 def bezier(coeffs: np.ndarray, s: np.ndarray | float, deriv: int = 0) -> np.ndarray | float:
@@ -188,21 +209,7 @@ class BezierConstraint:
         b = [_on_basis(self.coeffs, bernstein_basis(self.order, s, d)) for d in range(3)]
         return b[0], b[1] / self.span, b[2] / self.span**2
 
-    @staticmethod
-    def second_coeff(a0: float, slope: float, theta_plus: float, theta_minus: float, order: int):
-        """``a_1`` that gives ``phi'(theta_plus) = slope`` (impact invariance).
-
-        Args:
-            a0: first coefficient ``a_0`` [rad].
-            slope: wanted ``d phi / d theta`` at ``theta_plus`` [-].
-            theta_plus: phase at the start of the step [rad].
-            theta_minus: phase at the planned impact [rad].
-            order: polynomial order ``M``.
-
-        Returns:
-            The coefficient ``a_1`` [rad].
-        """
-        return a0 + slope * (theta_minus - theta_plus) / order
+    second_coeff = staticmethod(second_coeff)
 
     @staticmethod
     def penultimate_coeff(

@@ -29,7 +29,7 @@ from envs.physics.params import PL
 from envs.physics.terrain import terrain_height
 
 from .. import reduced as rd
-from ..bezier import bezier_on_basis, chord_coefficients
+from ..bezier import bezier_on_basis, chord_coefficients, second_coeff
 
 __all__ = [
     "StepGrids",
@@ -37,11 +37,18 @@ __all__ = [
     "StepOutputs",
     "StepScalars",
     "StepSettings",
+    "evaluate_shapes",
     "evaluate_steps",
     "pack",
     "packed_size",
+    "pair_values",
     "residual_count",
+    "step_values",
 ]
+
+
+_jit = njit(cache=True, error_model="numpy")
+_EMPTY = np.empty(0)  # no row-by-row start (evaluate_shapes)
 
 
 class StepSettings(NamedTuple):
@@ -148,14 +155,12 @@ class StepOutputs(NamedTuple):
         )
 
 
+@_jit
 def residual_count(nodes: int, order: int) -> int:
     """Length of a row of :attr:`StepOutputs.residuals`: the speed term, then the effort on
     each of ``nodes`` nodes (periodic gait) or the end speed, the post-impact slope and the
     ``order - 2`` shape terms (steps)."""
     return 1 + max(nodes, order + 1)
-
-
-_jit = njit(cache=True, error_model="numpy")
 
 
 @_jit
@@ -224,6 +229,7 @@ def evaluate_steps(
     fxr = np.empty(nk)
     fyr = np.empty(nk)
     ahead = np.empty(nk)
+    fk = np.empty(nk)
     for b in range(nb):
         # constraint and its phase derivatives on the nodes
         bezier_on_basis(a[b], B0, ph)
@@ -268,11 +274,9 @@ def evaluate_steps(
             G[b, col.stance_reaction + nn + k] = (
                 model.friction_cone_margin(fn, ft, cfg.friction) / weight
             )
+        rd.matvec(interp, F[b], fk)  # theta_dot^2 on the check grid
         for k in range(nk):
-            s = 0.0
-            for j in range(nn):
-                s += interp[k, j] * F[b, j]
-            G[b, col.thetadot_sq + nn + k] = (s - step.fmin) / (thd_ref * thd_ref)
+            G[b, col.thetadot_sq + nn + k] = (fk[k] - step.fmin) / (thd_ref * thd_ref)
         # swing foot on the check grid, full length and retracted
         i_arm = -1
         bezier_on_basis(a[b], Bg, phg)
@@ -414,3 +418,100 @@ def pack(G, offsets, block, out):
                     v = 1e3
                 out[b, c] = v
                 c += 1
+
+
+@_jit
+def _outputs(rows, columns, nodes, order):
+    """:meth:`StepOutputs.allocate` inside compiled code."""
+    return StepOutputs(
+        np.empty((rows, columns)),
+        np.empty((rows, nodes)),
+        np.empty((rows, nodes)),
+        np.empty(rows),
+        np.empty(rows),
+        np.empty(rows),
+        np.empty(rows),
+        np.empty(rows),
+        np.empty(rows),
+        np.empty(rows),
+        np.empty(rows),
+        np.empty(rows),
+        np.zeros((rows, residual_count(nodes, order))),
+    )
+
+
+@_jit
+def evaluate_shapes(
+    P, free, fixed, slope_in, thd_in, use_ref, shape_ref, cfg, step, grids, ground, col, offsets,
+    block, packed
+):  # fmt: skip
+    """:func:`evaluate_steps` for steps (not the periodic gait) given by their free
+    coefficients ``a_2 .. a_{M-1}`` (``free``, ``(B, M - 2)``), and :func:`pack`: one compiled
+    call for what an optimiser asks of a batch.
+
+    ``fixed``: ``(a_0, a_M, phi'(theta_plus), theta_plus, theta_minus, theta_dot_plus)`` of the
+    step [rad, rad, -, rad, rad, rad/s]; ``slope_in``, ``thd_in``: the start slope and
+    ``theta_dot`` row by row (``(B,)``), or empty for ``fixed``'s (the start of a step that
+    follows a step being optimised). ``a_1`` is the one of impact invariance
+    (:meth:`controllers.bezier.BezierConstraint.second_coeff`). ``offsets``, ``block``,
+    ``packed``: the constraint layout's offsets, the packing block and the packed length.
+    Returns ``(a, out, g)``: the coefficients ``(B, M + 1)``, the :class:`StepOutputs` and the
+    packed constraints ``(B, packed)``.
+    """
+    nb, k = free.shape
+    m = k + 2
+    a0, a_last, slope, theta_plus, theta_minus, thd_plus = fixed
+    a = np.empty((nb, m + 1))
+    thd = np.empty(nb)
+    for b in range(nb):
+        a[b, 0] = a0
+        for i in range(k):
+            a[b, 2 + i] = free[b, i]
+        a[b, m] = a_last
+        sl = slope_in[b] if slope_in.size else slope
+        a[b, 1] = second_coeff(a0, sl, theta_plus, theta_minus, m)
+        thd[b] = thd_in[b] if thd_in.size else thd_plus
+    out = _outputs(nb, offsets[-1], grids.nodes.size, m)
+    evaluate_steps(P, a, thd, False, use_ref, shape_ref, cfg, step, grids, ground, col, out)
+    g = np.empty((nb, packed))
+    pack(out.constraints, offsets, block, g)
+    return a, out, g
+
+
+@_jit
+def step_values(
+    P, free, fixed, use_ref, shape_ref, cfg, step, grids, ground, col, offsets, block, packed
+):
+    """The cost ``(B,)`` and packed constraints ``(B, packed)`` of :func:`evaluate_shapes`
+    (its arguments, the start given by ``fixed``): what each SLSQP evaluation needs, and no
+    more crosses back to Python."""
+    _, out, g = evaluate_shapes(
+        P, free, fixed, _EMPTY, _EMPTY, use_ref, shape_ref, cfg, step, grids, ground, col,
+        offsets, block, packed
+    )  # fmt: skip
+    return out.cost, g
+
+
+@_jit
+def pair_values(P, free, n, use_ref, shape_ref, cfg, grids, block, first, second):
+    """The cost ``(B,)`` and packed constraints ``(B, packed + packed2)`` of a step and the
+    next one optimised together: ``free[:, :n]`` the first step's free coefficients,
+    ``free[:, n:]`` the second's, which starts where the first ends (its start slope and
+    ``theta_dot``, the impact's, row by row). ``first``, ``second``: each step's ``(fixed,
+    step, ground, col, offsets, packed)`` as :func:`evaluate_shapes` takes them (the second's
+    start in ``fixed`` is ignored). The cost is the sum of the two steps'."""
+    fixed, step, ground, col, offsets, packed = first
+    _, o1, g1 = evaluate_shapes(
+        P, free[:, :n], fixed, _EMPTY, _EMPTY, use_ref, shape_ref, cfg, step, grids, ground,
+        col, offsets, block, packed
+    )  # fmt: skip
+    fixed, step, ground, col, offsets, packed2 = second
+    _, o2, g2 = evaluate_shapes(
+        P, free[:, n:], fixed, o1.slope_plus, o1.delta * o1.thetadot_minus, use_ref, shape_ref,
+        cfg, step, grids, ground, col, offsets, block, packed2
+    )  # fmt: skip
+    nb = free.shape[0]
+    g = np.empty((nb, packed + packed2))
+    g[:, :packed] = g1
+    g[:, packed:] = g2
+    return o1.cost + o2.cost, g

@@ -35,7 +35,7 @@ from envs.physics import model
 from envs.physics.params import RobotParams
 
 from .. import reduced as rd
-from ..bezier import BezierConstraint, bernstein_basis, chord_coefficients
+from ..bezier import bernstein_basis, chord_coefficients, second_coeff
 from . import kernel
 from .config import PlannerConfig
 from .footholds import TerrainMap
@@ -71,6 +71,7 @@ _PACK_BLOCK = 8  # long constraint groups reach SLSQP as minima over blocks of g
 _STALL_ITERATIONS, _STALL_WINDOW, _STALL_GAIN, _STALL_VIOLATION = 25, 5, 0.95, 1e-4
 _FD_STEP = math.sqrt(np.finfo(float).eps)  # forward-difference step of the Jacobians
 _PROBLEMS_KEPT = 16  # step problems whose kernel data a StepEvaluator keeps
+_NONE = np.empty(0)  # no row-by-row override (kernel.evaluate_shapes)
 # the scaled solves' eigenvalue floor, relative to the largest: only a guard against a
 # singular model (the eigenvalues of the paper robot's step models span a factor of about 40)
 _SCALING_FLOOR = 1e-6
@@ -296,15 +297,11 @@ class StepEvaluator:
         )
         self.settings = StepSettings(*(float(v) for v in settings))
 
-    def coeffs(
-        self,
-        fx: FixedStep,
-        free: np.ndarray,
-        periodic: bool = False,
-        slope: np.ndarray | float | None = None,
-    ) -> np.ndarray:
+    def coeffs(self, fx: FixedStep, free: np.ndarray, periodic: bool = False) -> np.ndarray:
         """Coefficients ``a_0 .. a_M`` for free coefficients ``free`` (shape ``(k,)`` or a batch
-        ``(B, k)``; the result has the same leading shape). ``slope`` overrides ``fx.slope``."""
+        ``(B, k)``; the result has the same leading shape). With ``periodic``, ``a_1`` gives the
+        step's own post-impact slope (a period-one gait), else ``fx.slope`` (the compiled
+        evaluation of steps, :func:`kernel.evaluate_shapes`, assembles them itself)."""
         m = self.cfg.order
         span = fx.theta_minus - fx.theta_plus
         x = np.asarray(free, dtype=np.float64)
@@ -312,12 +309,12 @@ class StepEvaluator:
         a[..., 0] = fx.a0
         a[..., 2:m] = x
         a[..., m] = fx.a_last
-        sl = fx.slope if slope is None else slope
+        sl = fx.slope
         if periodic:  # the step's own post-impact direction
             _, sl = rd.impact_along_constraint(
                 self.P, a[..., m], m * (a[..., m] - a[..., m - 1]) / span
             )
-        a[..., 1] = BezierConstraint.second_coeff(fx.a0, sl, fx.theta_plus, fx.theta_minus, m)
+        a[..., 1] = second_coeff(fx.a0, sl, fx.theta_plus, fx.theta_minus, m)
         return a
 
     def evaluate(self, fx: FixedStep, free: np.ndarray, periodic: bool = False) -> dict[str, Any]:
@@ -348,6 +345,58 @@ class StepEvaluator:
                 fx, np.asarray(free, dtype=np.float64), periodic, slope, thetadot_plus
             )
 
+    def step_values(self, fx: FixedStep, free: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """The costs ``(B,)`` and packed constraints ``(B, m)`` of :meth:`evaluate_batch` (a
+        step, not the periodic gait) for the free coefficients ``free`` (``(B, k)``), in one
+        compiled call: the same numbers, nothing else."""
+        _, _, _, shape_ref, step = self._problem_data(fx, False)
+        fixed, scalars, ground, columns, offsets, packed = step
+        return kernel.step_values(
+            self.P,
+            self._free(free),
+            fixed,
+            self.ref is not None,
+            shape_ref,
+            self.settings,
+            scalars,
+            self.grids,
+            ground,
+            columns,
+            offsets,
+            _PACK_BLOCK,
+            packed,
+        )
+
+    def pair_values(
+        self, fx: FixedStep, fx2: FixedStep, free: np.ndarray
+    ) -> tuple[np.ndarray, np.ndarray]:
+        """:meth:`step_values` of a step and the next one optimised together (``free``: both
+        steps' free coefficients, ``(B, 2 k)``): the sum of their costs and their constraints
+        side by side, the second step starting where the first ends row by row (the impact's
+        ``theta_dot`` and slope; ``fx2``'s start is ignored)."""
+        _, _, _, shape_ref, first = self._problem_data(fx, False)
+        second = self._problem_data(fx2, False)[4]
+        return kernel.pair_values(
+            self.P,
+            self._free(free, 2),
+            self.cfg.order - 2,
+            self.ref is not None,
+            shape_ref,
+            self.settings,
+            self.grids,
+            _PACK_BLOCK,
+            first,
+            second,
+        )
+
+    def _free(self, free: np.ndarray, steps: int = 1) -> np.ndarray:
+        """``free`` as the kernel takes it, checked against the order: ``(B, steps (M - 2))``."""
+        free = np.ascontiguousarray(free, dtype=np.float64)
+        k = steps * (self.cfg.order - 2)
+        if free.ndim != 2 or free.shape[1] != k:
+            raise ValueError(f"free coefficients of shape {free.shape}; allowed: (rows, {k})")
+        return free
+
     def _faces(self, xs: float, x_foot: float) -> tuple[StepGround, float, float]:
         """The ground between the stance foot and the foothold (terrain and the faces crossed),
         and the ground slopes under the stance foot and the foothold."""
@@ -371,8 +420,10 @@ class StepEvaluator:
 
     def _problem_data(self, fx: FixedStep, periodic: bool) -> tuple:
         """What the kernel needs of the step problem besides its shapes: ``(scalars, ground,
-        layout, shape_ref)``, the same for every batch of one problem (kept for the last few
-        problems: an optimisation evaluates the same one, or a pair, many times)."""
+        layout, shape_ref, step)``, the same for every batch of one problem (kept for the last
+        few problems: an optimisation evaluates the same one, or a pair, many times);
+        ``step``: the problem as :func:`kernel.evaluate_shapes` and :func:`kernel.pair_values`
+        take it, ``(fixed, scalars, ground, columns, offsets, packed)``."""
         key = (id(fx), periodic, self.wscale, id(self.ref))
         hit = self._problems.get(key)
         if hit is not None and hit[0] is fx and hit[1] is self.ref:
@@ -412,43 +463,46 @@ class StepEvaluator:
             slope_ref=slope_ref,
             delta_ref=delta_ref,
         )
-        data = (
-            StepScalars(*(float(v) for v in scalars)),
+        scalars = StepScalars(*(float(v) for v in scalars))
+        fixed = (fx.a0, fx.a_last, fx.slope, fx.theta_plus, fx.theta_minus, fx.thetadot_plus)
+        step = (
+            tuple(float(v) for v in fixed),
+            scalars,
             ground,
-            layout,
-            np.ascontiguousarray(shape_ref, dtype=np.float64),
+            layout.columns,
+            layout.offsets,
+            layout.packed,
         )
+        data = (scalars, ground, layout, np.ascontiguousarray(shape_ref, dtype=np.float64), step)
         if len(self._problems) >= _PROBLEMS_KEPT:
             self._problems.clear()
         self._problems[key] = (fx, self.ref, data)
         return data
 
     def _evaluate(self, fx, free, periodic, slope_in, thd_in) -> dict[str, Any]:
-        grids = self.grids
-        nb = free.shape[0]
-        a = np.ascontiguousarray(self.coeffs(fx, free, periodic, slope_in))
-        scalars, ground, layout, shape_ref = self._problem_data(fx, periodic)
-        if periodic or thd_in is None:
-            thd_plus = np.full(nb, float(fx.thetadot_plus))
+        free = self._free(free)
+        scalars, ground, layout, shape_ref, step = self._problem_data(fx, periodic)
+        if periodic:
+            a, out, g = self._evaluate_periodic(fx, free, scalars, ground, layout, shape_ref)
         else:
-            thd_plus = np.ascontiguousarray(thd_in, dtype=np.float64)
-        out = StepOutputs.allocate(nb, int(layout.offsets[-1]), grids.nodes.size, self.cfg.order)
-        kernel.evaluate_steps(
-            self.P,
-            a,
-            thd_plus,
-            periodic,
-            self.ref is not None,
-            shape_ref,
-            self.settings,
-            scalars,
-            grids,
-            ground,
-            layout.columns,
-            out,
-        )
-        g = np.empty((nb, layout.packed))
-        kernel.pack(out.constraints, layout.offsets, _PACK_BLOCK, g)
+            fixed, scalars, ground, columns, offsets, packed = step
+            a, out, g = kernel.evaluate_shapes(
+                self.P,
+                free,
+                fixed,
+                _NONE if slope_in is None else np.ascontiguousarray(slope_in, dtype=np.float64),
+                _NONE if thd_in is None else np.ascontiguousarray(thd_in, dtype=np.float64),
+                self.ref is not None,
+                shape_ref,
+                self.settings,
+                scalars,
+                self.grids,
+                ground,
+                columns,
+                offsets,
+                _PACK_BLOCK,
+                packed,
+            )
         return {
             "a": a,
             "f": out.thetadot_sq,
@@ -466,6 +520,31 @@ class StepEvaluator:
             "gain": out.gain,
             "residuals": out.residuals,
         }
+
+    def _evaluate_periodic(self, fx, free, scalars, ground, layout, shape_ref):
+        """``(a, outputs, g)`` of periodic-gait shapes (the start speed is the fixed point)."""
+        nb = free.shape[0]
+        grids = self.grids
+        a = np.ascontiguousarray(self.coeffs(fx, free, True))
+        out = StepOutputs.allocate(nb, int(layout.offsets[-1]), grids.nodes.size, self.cfg.order)
+        thd_plus = np.full(nb, float(fx.thetadot_plus))  # (ignored: the fixed point is used)
+        kernel.evaluate_steps(
+            self.P,
+            a,
+            thd_plus,
+            True,
+            self.ref is not None,
+            shape_ref,
+            self.settings,
+            scalars,
+            grids,
+            ground,
+            layout.columns,
+            out,
+        )
+        g = np.empty((nb, layout.packed))
+        kernel.pack(out.constraints, layout.offsets, _PACK_BLOCK, g)
+        return a, out, g
 
 
 def shape_guess(rel: np.ndarray, a0: float, a_last: float, order: int) -> np.ndarray:
@@ -545,12 +624,15 @@ class BatchProblem:
 
     ``fn(X)`` evaluates the rows of ``X`` (shape ``(B, k)``) and returns ``(cost, g, ev)``:
     costs ``(B,)``, packed constraints ``(B, m)`` and any batch payload (kept with the row
-    index). The Jacobians are forward differences whose ``k`` perturbed points are evaluated in
-    one batched call (the same derivatives SLSQP would take by itself, at a fraction of the cost).
-    With a :class:`SearchBudget` every evaluation is accounted; once it is spent, any further
-    evaluation raises :class:`BudgetExhausted`. ``residuals(payload)`` (optional) gives the
-    cost's terms of a batch, ``(B, R)`` with ``cost = sum(r^2)`` row by row: the Gauss-Newton
-    model of :meth:`minimize` with ``scaled``.
+    index). ``values(X)`` (optional) returns only ``(cost, g)``, the same numbers at less cost:
+    then points are evaluated with it, and ``fn`` runs where a point's payload is asked for
+    (:meth:`details`). The Jacobians are forward differences whose ``k`` perturbed points are
+    evaluated in one batched call (the same derivatives SLSQP would take by itself, at a
+    fraction of the cost). With a :class:`SearchBudget` every point evaluated is accounted,
+    once; once it is spent, any further evaluation raises :class:`BudgetExhausted` (a payload
+    asked for at a point already evaluated is not accounted again). ``residuals(payload)``
+    (optional) gives the cost's terms of a batch, ``(B, R)`` with ``cost = sum(r^2)`` row by
+    row: the Gauss-Newton model of :meth:`minimize` with ``scaled``.
     """
 
     def __init__(
@@ -558,34 +640,63 @@ class BatchProblem:
         fn: Callable[[np.ndarray], tuple[np.ndarray, np.ndarray, Any]],
         budget: SearchBudget | None = None,
         residuals: Callable[[Any], np.ndarray] | None = None,
+        values: Callable[[np.ndarray], tuple[np.ndarray, np.ndarray]] | None = None,
     ):
         self.fn = fn
         self.budget = budget
         self.residuals = residuals
+        self.values = values
         self.cache: dict[bytes, tuple[float, np.ndarray, Any, int]] = {}
         self._jac: dict[bytes, tuple[np.ndarray, np.ndarray]] = {}
+        # forward-difference batches evaluated whole: (points, costs, constraints) by point
+        self._points: dict[bytes, tuple[np.ndarray, np.ndarray, np.ndarray]] = {}
 
-    def _fill(self, X: np.ndarray) -> None:
+    def _fill(self, X: np.ndarray, payload: bool = False) -> tuple[np.ndarray, np.ndarray] | None:
+        """Evaluate the rows of ``X`` not evaluated yet (with ``payload``, also the payload of
+        those evaluated without it); ``(cost, g)`` of the batch if every row was new."""
         keys = [x.tobytes() for x in X]
         todo = [i for i, k in enumerate(keys) if k not in self.cache]
-        if not todo:
-            return
-        if self.budget is not None:
-            self.budget.spend(len(todo))
-        cost, g, ev = self.fn(X[todo])
-        for r, i in enumerate(todo):
-            self.cache[keys[i]] = (float(cost[r]), g[r], ev, r)
+        fresh = None
+        if todo:
+            if self.budget is not None:
+                self.budget.spend(len(todo))
+            if self.values is None or payload:
+                cost, g, ev = self.fn(X[todo] if len(todo) < len(keys) else X)
+            else:
+                (cost, g), ev = self.values(X[todo] if len(todo) < len(keys) else X), None
+            for r, i in enumerate(todo):
+                self.cache[keys[i]] = (float(cost[r]), g[r], ev, r)
+            if len(todo) == len(keys):
+                fresh = cost, g
+        if payload:  # points evaluated without their payload: once more, with it
+            bare = [i for i, k in enumerate(keys) if self.cache[k][2] is None]
+            if bare:
+                _, _, ev = self.fn(X[bare])
+                for r, i in enumerate(bare):
+                    c, g_row, _, _ = self.cache[keys[i]]
+                    self.cache[keys[i]] = (c, g_row, ev, r)
+        return fresh
 
     def get(self, x: np.ndarray) -> tuple[float, np.ndarray, Any, int]:
-        """``(cost, g, payload, row)`` at ``x``."""
+        """``(cost, g, payload, row)`` at ``x`` (the payload None if not evaluated yet: see
+        :meth:`details`)."""
         x = np.ascontiguousarray(x, dtype=np.float64)
         self._fill(x[None, :])
         return self.cache[x.tobytes()]
 
-    def evaluate_many(self, X: np.ndarray) -> list[tuple[float, np.ndarray, Any, int]]:
-        """:meth:`get` for every row of ``X`` in one batched call."""
+    def details(self, x: np.ndarray) -> tuple[float, np.ndarray, Any, int]:
+        """:meth:`get` with the payload."""
+        x = np.ascontiguousarray(x, dtype=np.float64)
+        self._fill(x[None, :], payload=True)
+        return self.cache[x.tobytes()]
+
+    def evaluate_many(
+        self, X: np.ndarray, payload: bool = False
+    ) -> list[tuple[float, np.ndarray, Any, int]]:
+        """:meth:`get` (:meth:`details` with ``payload``) for every row of ``X`` in one batched
+        call."""
         X = np.ascontiguousarray(X, dtype=np.float64)
-        self._fill(X)
+        self._fill(X, payload)
         return [self.cache[x.tobytes()] for x in X]
 
     def _jacobians(self, x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -594,14 +705,18 @@ class BatchProblem:
         hit = self._jac.get(key)
         if hit is not None:  # SLSQP asks for the cost's and the constraints' at each point
             return hit
-        X = _fd_points(x)
-        rows = self.evaluate_many(X)
+        batch = self._points.pop(key, None)  # evaluated together (_with_jacobian_points)
+        if batch is None:
+            X = _fd_points(x)
+            rows = self.evaluate_many(X)
+            cost = np.array([r[0] for r in rows])
+            g = np.stack([r[1] for r in rows])
+        else:
+            X, cost, g = batch
         h = np.diag(X[1:]) - x  # the steps actually taken
-        cost = np.array([r[0] for r in rows])
-        g = np.stack([r[1] for r in rows], axis=1)
         with np.errstate(all="ignore"):
             dc = (cost[1:] - cost[0]) / h
-            dg = (g[:, 1:] - g[:, :1]) / h
+            dg = ((g[1:] - g[0]) / h[:, None]).T
         # a point where the step model breaks down (NaN mapped to +-1e3) gives huge slopes
         for d in (dc, dg):
             d[np.isnan(d)] = 0.0
@@ -616,7 +731,10 @@ class BatchProblem:
         x = np.ascontiguousarray(x, dtype=np.float64)
         key = x.tobytes()
         if key not in self.cache:
-            self._fill(_fd_points(x))
+            X = _fd_points(x)
+            fresh = self._fill(X)
+            if fresh is not None:
+                self._points[key] = (X, *fresh)
         return self.cache[key]
 
     def scaling(self, x0: np.ndarray) -> np.ndarray | None:
@@ -629,7 +747,7 @@ class BatchProblem:
             return None
         x0 = np.ascontiguousarray(x0, dtype=np.float64)
         X = _fd_points(x0)
-        rows = self.evaluate_many(X)
+        rows = self.evaluate_many(X, payload=True)
         R = np.stack([self.residuals(p)[r] for _, _, p, r in rows])
         with np.errstate(all="ignore"):
             J = (R[1:] - R[0]).T / (np.diag(X[1:]) - x0)

@@ -411,13 +411,15 @@ class StepSearch:
         def residuals(ev):
             return np.concatenate([ev["residuals"], ev["next_residuals"]], axis=1)
 
-        prob = BatchProblem(batch, self.evaluations, residuals)
+        prob = BatchProblem(
+            batch, self.evaluations, residuals, lambda X: sm.pair_values(fx, fx2, X)
+        )
         key = self._problem_key(fx, fx2)
         if key in memo.failed:
             return memo.failed[key], False
         x = self._reuse(prob, key, np.concatenate([x0, x02]), keep)
         if x is not None:
-            _, _, e1, r = prob.get(x)
+            _, _, e1, r = prob.details(x)
             return batch_row(e1, r), True
         self.fresh = True
         x = prob.minimize(
@@ -427,7 +429,7 @@ class StepSearch:
             self.struggling,
             bool(self.config.gauss_newton_scaling),
         )
-        _, g, e1, r = prob.get(x)
+        _, g, e1, r = prob.details(x)
         ok = bool(np.min(g) >= -1e-7)
         if ok:
             memo.solved[key] = x
@@ -462,7 +464,9 @@ class StepSearch:
             ev = sm.evaluate_batch(fx, X)
             return ev["cost"], ev["g"], ev
 
-        prob = BatchProblem(batch, self.evaluations, lambda ev: ev["residuals"])
+        prob = BatchProblem(
+            batch, self.evaluations, lambda ev: ev["residuals"], lambda X: sm.step_values(fx, X)
+        )
 
         def run(xs):
             x = prob.minimize(
@@ -472,7 +476,7 @@ class StepSearch:
                 self.struggling,
                 bool(self.config.gauss_newton_scaling),
             )
-            _, g, ev, r = prob.get(x)
+            _, g, ev, r = prob.details(x)
             return batch_row(ev, r), bool(np.min(g) >= -1e-7)
 
         key = self._problem_key(fx, None)
@@ -480,7 +484,7 @@ class StepSearch:
             return memo.failed[key], False
         x = self._reuse(prob, key, x0, keep)
         if x is not None:
-            _, _, evm, r = prob.get(x)
+            _, _, evm, r = prob.details(x)
             return batch_row(evm, r), True
         self.fresh = True
         ev, ok = run(x0)

@@ -153,3 +153,19 @@ def test_the_compiled_grid_integrals_are_the_reduced_integral_and_step_time(robo
     out = np.empty(n + 1)
     rd.grid_cumulative_integral(np.cos(th), q, half, out)
     np.testing.assert_allclose(out, rd.cumulative_integral(np.cos(th), th[0], th[-1]), atol=1e-15)
+
+
+@pytest.mark.parametrize("rows", [1, 4, 7, 33, 97])
+def test_the_compiled_matrix_vector_product_sums_each_row_in_order(rows):
+    """``matvec`` (four rows at a time) gives each entry bit for bit as one running sum over the
+    row in order does, and ``a @ x`` to rounding."""
+    rng = np.random.default_rng(rows)
+    a, x = rng.standard_normal((rows, 33)), rng.standard_normal(33)
+    out = np.empty(rows)
+    rd.matvec(a, x, out)
+    for k in range(rows):
+        s = 0.0
+        for j in range(x.size):
+            s += a[k, j] * x[j]
+        assert out[k] == s
+    np.testing.assert_allclose(out, a @ x, rtol=1e-12, atol=1e-12)

@@ -9,8 +9,10 @@ from controllers.planner import TerrainMap
 from controllers.planner.kernel import StepOutputs, packed_size
 from controllers.planner.problem import (
     CONSTRAINT_GROUPS,
+    BatchProblem,
     ConstraintGroups,
     FixedStep,
+    SearchBudget,
     StepEvaluator,
     constraint_layout,
     gait_reference,
@@ -35,6 +37,73 @@ def test_batched_step_evaluation_matches_single_points(planners):
         assert batch["T"][i] == pytest.approx(one["T"], rel=1e-12)
     # the fixed coefficients come from the step's start and end
     np.testing.assert_allclose(sm.evaluate(fx, st.coeffs[2:-1])["a"], st.coeffs, atol=1e-12)
+
+
+def _pair(planners):
+    """A step of the gait on high blocks and the step after it (its start left open)."""
+    sm, fx, st = gait_step(planners["paper"], CASES["paper"]["blocks_high"])
+    x1 = fx.foothold[0] + st.step_length
+    fx2 = FixedStep(
+        st.theta_plus,
+        st.coeffs[0],
+        float("nan"),
+        float("nan"),
+        fx.foothold,
+        (x1, float(sm.tmap.height(x1))),
+        st.theta_minus,
+        st.coeffs[-1],
+    )
+    rng = np.random.default_rng(2)
+    x = np.tile(st.coeffs[2:-1], 2) + 0.03 * rng.standard_normal((7, 2 * (st.coeffs.size - 3)))
+    return sm, fx, fx2, x
+
+
+def _pair_batch(sm, fx, fx2, X):
+    """The pair's cost and constraints from two full evaluations (the search's payload path)."""
+    n = (X.shape[1]) // 2
+    e1 = sm.evaluate_batch(fx, X[:, :n])
+    thd2 = e1["delta"] * e1["thetadot_minus"]
+    e2 = sm.evaluate_batch(fx2, X[:, n:], slope=e1["slope_plus"], thetadot_plus=thd2)
+    return e1["cost"] + e2["cost"], np.concatenate([e1["g"], e2["g"]], axis=1), e1
+
+
+def test_the_compiled_values_are_the_full_evaluations_numbers(planners):
+    """What SLSQP gets from the lean compiled calls (a step; a step and the next one, which
+    starts where the first ends, row by row) is, bit for bit, the cost and constraints of the
+    full evaluations the search keeps for the steps it plans."""
+    sm, fx, fx2, x = _pair(planners)
+    n = x.shape[1] // 2
+    cost, g = sm.step_values(fx, x[:, :n])
+    ev = sm.evaluate_batch(fx, x[:, :n])
+    assert np.array_equal(cost, ev["cost"]) and np.array_equal(g, ev["g"], equal_nan=True)
+    cost, g = sm.pair_values(fx, fx2, x)
+    cost2, g2, _ = _pair_batch(sm, fx, fx2, x)
+    assert np.array_equal(cost, cost2) and np.array_equal(g, g2, equal_nan=True)
+    assert g.shape[1] > ev["g"].shape[1]  # both steps' constraints
+    with pytest.raises(ValueError, match="free coefficients of shape"):
+        sm.step_values(fx, x)  # a pair's coefficients for one step
+
+
+def test_an_optimisation_on_the_compiled_values_is_the_one_on_full_evaluations(planners):
+    """SLSQP on a pair reaches the same point with the same evaluations spent whether its
+    points are evaluated by the lean compiled call or in full; the payload of a point evaluated
+    lean comes on request (:meth:`BatchProblem.details`) without being accounted again."""
+    sm, fx, fx2, x = _pair(planners)
+    runs = []
+    for lean in (False, True):
+        budget = SearchBudget(10**6)
+        values = (lambda X: sm.pair_values(fx, fx2, X)) if lean else None
+        prob = BatchProblem(lambda X: _pair_batch(sm, fx, fx2, X), budget, values=values)
+        xs = prob.minimize(x[0], 30, 1e-7)
+        used = budget.used
+        assert (prob.get(xs)[2] is None) == lean
+        cost, g, ev, r = prob.details(xs)
+        assert ev is not None and budget.used == used
+        assert np.array_equal(ev["a"][r, 2:-1], xs[: x.shape[1] // 2])  # the first step's
+        runs.append((xs, used, cost, g))
+    (x1, u1, c1, g1), (x2, u2, c2, g2) = runs
+    assert np.array_equal(x1, x2) and u1 == u2 > 0 and c1 == c2
+    assert np.array_equal(g1, g2, equal_nan=True)
 
 
 @pytest.mark.parametrize("periodic", [False, True])
