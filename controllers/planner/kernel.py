@@ -441,23 +441,24 @@ def _outputs(rows, columns, nodes, order):
 
 
 @_jit
-def evaluate_shapes(
-    P, free, fixed, slope_in, thd_in, use_ref, shape_ref, cfg, step, grids, ground, col, offsets,
-    block, packed
-):  # fmt: skip
+def evaluate_shapes(P, free, slope_in, thd_in, common, problem):
     """:func:`evaluate_steps` for steps (not the periodic gait) given by their free
     coefficients ``a_2 .. a_{M-1}`` (``free``, ``(B, M - 2)``), and :func:`pack`: one compiled
     call for what an optimiser asks of a batch.
 
-    ``fixed``: ``(a_0, a_M, phi'(theta_plus), theta_plus, theta_minus, theta_dot_plus)`` of the
-    step [rad, rad, -, rad, rad, rad/s]; ``slope_in``, ``thd_in``: the start slope and
-    ``theta_dot`` row by row (``(B,)``), or empty for ``fixed``'s (the start of a step that
-    follows a step being optimised). ``a_1`` is the one of impact invariance
-    (:meth:`controllers.bezier.BezierConstraint.second_coeff`). ``offsets``, ``block``,
-    ``packed``: the constraint layout's offsets, the packing block and the packed length.
-    Returns ``(a, out, g)``: the coefficients ``(B, M + 1)``, the :class:`StepOutputs` and the
-    packed constraints ``(B, packed)``.
+    ``common``: ``(use_ref, shape_ref, cfg, grids, block)``, what every step problem of a
+    planner shares (as :func:`evaluate_steps` takes them; ``block``: :func:`pack`'s);
+    ``problem``: ``(fixed, step, ground, col, offsets, packed)``, the step's own, ``fixed``
+    being ``(a_0, a_M, phi'(theta_plus), theta_plus, theta_minus, theta_dot_plus)`` [rad, rad,
+    -, rad, rad, rad/s], ``offsets`` and ``packed`` the constraint layout's offsets and packed
+    length. ``slope_in``, ``thd_in``: the start slope and ``theta_dot`` row by row (``(B,)``),
+    or empty for ``fixed``'s (the start of a step that follows a step being optimised).
+    ``a_1`` is the one of impact invariance (:func:`controllers.bezier.second_coeff`). Returns
+    ``(a, out, g)``: the coefficients ``(B, M + 1)``, the :class:`StepOutputs` and the packed
+    constraints ``(B, packed)``.
     """
+    use_ref, shape_ref, cfg, grids, block = common
+    fixed, step, ground, col, offsets, packed = problem
     nb, k = free.shape
     m = k + 2
     a0, a_last, slope, theta_plus, theta_minus, thd_plus = fixed
@@ -479,39 +480,28 @@ def evaluate_shapes(
 
 
 @_jit
-def step_values(
-    P, free, fixed, use_ref, shape_ref, cfg, step, grids, ground, col, offsets, block, packed
-):
-    """The cost ``(B,)`` and packed constraints ``(B, packed)`` of :func:`evaluate_shapes`
-    (its arguments, the start given by ``fixed``): what each SLSQP evaluation needs, and no
-    more crosses back to Python."""
-    _, out, g = evaluate_shapes(
-        P, free, fixed, _EMPTY, _EMPTY, use_ref, shape_ref, cfg, step, grids, ground, col,
-        offsets, block, packed
-    )  # fmt: skip
+def step_values(P, free, common, problem):
+    """The cost ``(B,)`` and packed constraints ``(B, packed)`` of :func:`evaluate_shapes` (its
+    arguments, the start given by the problem): what each SLSQP evaluation needs, and no more
+    crosses back to Python."""
+    _, out, g = evaluate_shapes(P, free, _EMPTY, _EMPTY, common, problem)
     return out.cost, g
 
 
 @_jit
-def pair_values(P, free, n, use_ref, shape_ref, cfg, grids, block, first, second):
+def pair_values(P, free, n, common, first, second):
     """The cost ``(B,)`` and packed constraints ``(B, packed + packed2)`` of a step and the
     next one optimised together: ``free[:, :n]`` the first step's free coefficients,
     ``free[:, n:]`` the second's, which starts where the first ends (its start slope and
-    ``theta_dot``, the impact's, row by row). ``first``, ``second``: each step's ``(fixed,
-    step, ground, col, offsets, packed)`` as :func:`evaluate_shapes` takes them (the second's
-    start in ``fixed`` is ignored). The cost is the sum of the two steps'."""
-    fixed, step, ground, col, offsets, packed = first
-    _, o1, g1 = evaluate_shapes(
-        P, free[:, :n], fixed, _EMPTY, _EMPTY, use_ref, shape_ref, cfg, step, grids, ground,
-        col, offsets, block, packed
-    )  # fmt: skip
-    fixed, step, ground, col, offsets, packed2 = second
+    ``theta_dot``, the impact's, row by row). ``common``, ``first``, ``second``: as
+    :func:`evaluate_shapes` takes them (the second's start in its ``fixed`` is ignored). The
+    cost is the sum of the two steps'."""
+    _, o1, g1 = evaluate_shapes(P, free[:, :n], _EMPTY, _EMPTY, common, first)
     _, o2, g2 = evaluate_shapes(
-        P, free[:, n:], fixed, o1.slope_plus, o1.delta * o1.thetadot_minus, use_ref, shape_ref,
-        cfg, step, grids, ground, col, offsets, block, packed2
-    )  # fmt: skip
+        P, free[:, n:], o1.slope_plus, o1.delta * o1.thetadot_minus, common, second
+    )
     nb = free.shape[0]
-    g = np.empty((nb, packed + packed2))
-    g[:, :packed] = g1
-    g[:, packed:] = g2
+    g = np.empty((nb, g1.shape[1] + g2.shape[1]))
+    g[:, : g1.shape[1]] = g1
+    g[:, g1.shape[1] :] = g2
     return o1.cost + o2.cost, g

@@ -349,23 +349,8 @@ class StepEvaluator:
         """The costs ``(B,)`` and packed constraints ``(B, m)`` of :meth:`evaluate_batch` (a
         step, not the periodic gait) for the free coefficients ``free`` (``(B, k)``), in one
         compiled call: the same numbers, nothing else."""
-        _, _, _, shape_ref, step = self._problem_data(fx, False)
-        fixed, scalars, ground, columns, offsets, packed = step
-        return kernel.step_values(
-            self.P,
-            self._free(free),
-            fixed,
-            self.ref is not None,
-            shape_ref,
-            self.settings,
-            scalars,
-            self.grids,
-            ground,
-            columns,
-            offsets,
-            _PACK_BLOCK,
-            packed,
-        )
+        _, _, _, shape_ref, problem = self._problem_data(fx, False)
+        return kernel.step_values(self.P, self._free(free), self._common(shape_ref), problem)
 
     def pair_values(
         self, fx: FixedStep, fx2: FixedStep, free: np.ndarray
@@ -377,17 +362,12 @@ class StepEvaluator:
         _, _, _, shape_ref, first = self._problem_data(fx, False)
         second = self._problem_data(fx2, False)[4]
         return kernel.pair_values(
-            self.P,
-            self._free(free, 2),
-            self.cfg.order - 2,
-            self.ref is not None,
-            shape_ref,
-            self.settings,
-            self.grids,
-            _PACK_BLOCK,
-            first,
-            second,
+            self.P, self._free(free, 2), self.cfg.order - 2, self._common(shape_ref), first, second
         )
+
+    def _common(self, shape_ref: np.ndarray) -> tuple:
+        """What :func:`kernel.evaluate_shapes` takes that every step problem shares."""
+        return (self.ref is not None, shape_ref, self.settings, self.grids, _PACK_BLOCK)
 
     def _free(self, free: np.ndarray, steps: int = 1) -> np.ndarray:
         """``free`` as the kernel takes it, checked against the order: ``(B, steps (M - 2))``."""
@@ -420,10 +400,10 @@ class StepEvaluator:
 
     def _problem_data(self, fx: FixedStep, periodic: bool) -> tuple:
         """What the kernel needs of the step problem besides its shapes: ``(scalars, ground,
-        layout, shape_ref, step)``, the same for every batch of one problem (kept for the last
-        few problems: an optimisation evaluates the same one, or a pair, many times);
-        ``step``: the problem as :func:`kernel.evaluate_shapes` and :func:`kernel.pair_values`
-        take it, ``(fixed, scalars, ground, columns, offsets, packed)``."""
+        layout, shape_ref, problem)``, the same for every batch of one problem (kept for the
+        last few problems: an optimisation evaluates the same one, or a pair, many times);
+        ``problem``: the step as :func:`kernel.evaluate_shapes` takes it, ``(fixed, scalars,
+        ground, columns, offsets, packed)``."""
         key = (id(fx), periodic, self.wscale, id(self.ref))
         hit = self._problems.get(key)
         if hit is not None and hit[0] is fx and hit[1] is self.ref:
@@ -465,7 +445,7 @@ class StepEvaluator:
         )
         scalars = StepScalars(*(float(v) for v in scalars))
         fixed = (fx.a0, fx.a_last, fx.slope, fx.theta_plus, fx.theta_minus, fx.thetadot_plus)
-        step = (
+        problem = (
             tuple(float(v) for v in fixed),
             scalars,
             ground,
@@ -473,7 +453,8 @@ class StepEvaluator:
             layout.offsets,
             layout.packed,
         )
-        data = (scalars, ground, layout, np.ascontiguousarray(shape_ref, dtype=np.float64), step)
+        shape_ref = np.ascontiguousarray(shape_ref, dtype=np.float64)
+        data = (scalars, ground, layout, shape_ref, problem)
         if len(self._problems) >= _PROBLEMS_KEPT:
             self._problems.clear()
         self._problems[key] = (fx, self.ref, data)
@@ -481,27 +462,17 @@ class StepEvaluator:
 
     def _evaluate(self, fx, free, periodic, slope_in, thd_in) -> dict[str, Any]:
         free = self._free(free)
-        scalars, ground, layout, shape_ref, step = self._problem_data(fx, periodic)
+        scalars, ground, layout, shape_ref, problem = self._problem_data(fx, periodic)
         if periodic:
             a, out, g = self._evaluate_periodic(fx, free, scalars, ground, layout, shape_ref)
         else:
-            fixed, scalars, ground, columns, offsets, packed = step
             a, out, g = kernel.evaluate_shapes(
                 self.P,
                 free,
-                fixed,
                 _NONE if slope_in is None else np.ascontiguousarray(slope_in, dtype=np.float64),
                 _NONE if thd_in is None else np.ascontiguousarray(thd_in, dtype=np.float64),
-                self.ref is not None,
-                shape_ref,
-                self.settings,
-                scalars,
-                self.grids,
-                ground,
-                columns,
-                offsets,
-                _PACK_BLOCK,
-                packed,
+                self._common(shape_ref),
+                problem,
             )
         return {
             "a": a,
