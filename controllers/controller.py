@@ -51,14 +51,19 @@ previous plan were feasible with the full settings and keep the transverse feedb
 
 Within the full problem and each relaxation, a search that fails beyond the second step keeps
 the feasible steps before the failure (``"shorter horizon"``, or the relaxation's name followed
-by ``", shorter horizon"``); where the planner's beam search over the horizon
-(``PlannerConfig.beam_width``) is on, it runs first when the depth-first search fails, and its
-plan over the whole horizon is tracked as a full plan (the record's reason says so). When none
-gives two steps, a single step (the first feasible step found, else what is left of the
-previous plan) is held with PD on ``y`` (``fallback = "PD on the last planned step"``; also
-when the Riccati solve over the look-ahead fails, and a step whose transverse model cannot be
-built ends the look-ahead); zero input (``fallback = "zero input"``) remains only when there is
-nothing at all to track (e.g. a non-finite state, or ``theta_dot`` already not positive).
+by ``", shorter horizon"``). With ``ControllerConfig.deeper_relaxation`` (a relaxation), a full
+problem that plans only such a shorter look-ahead is planned again under that relaxation, and
+the deeper of the two plans is tracked (``fallback = "relaxed: ..., deeper"``, or ``"relaxed:
+..., deeper, shorter horizon"``; tracked as any relaxed plan): a look-ahead that ends in a step
+the full problem cannot plan is a dead end the robot would walk into. Where the planner's
+beam search over the horizon (``PlannerConfig.beam_width``) is on, it runs first when the
+depth-first search fails, and its plan over the whole horizon is tracked as a full plan (the
+record's reason says so). When none gives two steps, a single step (the first feasible step
+found, else what is left of the previous plan) is held with PD on ``y`` (``fallback = "PD on
+the last planned step"``; also when the Riccati solve over the look-ahead fails, and a step
+whose transverse model cannot be built ends the look-ahead); zero input (``fallback = "zero
+input"``) remains only when there is nothing at all to track (e.g. a non-finite state, or
+``theta_dot`` already not positive).
 The step's :class:`StepRecord` says which, and why (``reason``: every degradation tried, with
 its planning error).
 """
@@ -86,7 +91,13 @@ from envs.physics.params import RobotParams, as_params
 from envs.physics.simulator import SimConfig, Simulator
 from envs.physics.terrain import Terrain, as_terrain
 
-from .fallbacks import DEFAULT_FALLBACKS, TUBE_FALLBACKS, fallback_items, fallback_name
+from .fallbacks import (
+    DEFAULT_FALLBACKS,
+    TUBE_FALLBACKS,
+    fallback_items,
+    fallback_name,
+    relaxation_item,
+)
 from .feedback import constraint_at, feedback_law, thetadot_sq_at
 from .gains import GainTable, HorizonSolution, horizon_gains, pd_gains, step_models
 from .numerics import one_blas_thread
@@ -170,6 +181,10 @@ class ControllerConfig:
             ``fallbacks``; the full problem is not tried first). Default
             :data:`TUBE_FALLBACKS`: ``duration_min`` 0.05 s with the torque limit, then the
             current plan.
+        deeper_relaxation: a relaxation (a mapping of :class:`PlannerConfig` fields to relaxed
+            values, as an item of ``fallbacks``) under which a full problem that plans fewer
+            steps than the look-ahead is planned again, the deeper plan tracked (see the module
+            docstring); empty (default): the shorter look-ahead is tracked.
         relaxed_feedback: what tracks a plan outside the full problem's constraints (the
             step's ``fallback`` is a relaxation, ``"relaxed: ..."``, or ``"least violation"``):
             ``"pd"`` (default), PD on ``y`` with :data:`FALLBACK_PD`, no feedback on the speed
@@ -199,12 +214,16 @@ class ControllerConfig:
     tube_phase: float = 0.6
     tube_replans: int = 1
     tube_fallbacks: tuple = TUBE_FALLBACKS
+    deeper_relaxation: tuple = ()
     relaxed_feedback: str = "pd"
     friction_limit: float = 0.0
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "fallbacks", fallback_items(self.fallbacks))
-        object.__setattr__(self, "tube_fallbacks", fallback_items(self.tube_fallbacks))
+        object.__setattr__(
+            self, "tube_fallbacks", fallback_items(self.tube_fallbacks, "tube_fallbacks")
+        )
+        object.__setattr__(self, "deeper_relaxation", relaxation_item(self.deeper_relaxation))
         lows = {
             "horizon": 1,
             "grid": 4,
@@ -627,6 +646,10 @@ class TransverseController:
                 # the steps before the failure are feasible: a shorter look-ahead
                 plan = Plan(exc.partial, self.robot, planner.config)
                 name = "shorter horizon" if level is None else f"{name}, shorter horizon"
+                if level is None and self.config.deeper_relaxation:
+                    plan, name, left = self._deeper(
+                        q, qd, n, previous, rec, notes, left, cap, plan, name
+                    )
             except ValueError as exc:  # a state the planner cannot start from
                 notes.append(f"{name}: {exc}")
                 break
@@ -661,6 +684,55 @@ class TransverseController:
             rec.fallback = "previous plan"
             return old
         return None
+
+    def _deeper(
+        self,
+        q: np.ndarray,
+        qd: np.ndarray,
+        n: int,
+        previous: Plan | None,
+        rec: StepRecord,
+        notes: list[str],
+        left: int,
+        cap: int,
+        plan: Plan,
+        name: str,
+    ) -> tuple[Plan, str, int]:
+        """The full problem planned only ``plan``, a shorter look-ahead: plan again under
+        ``ControllerConfig.deeper_relaxation`` and return the deeper plan, its fallback name and
+        the replanning budget left (``plan`` and ``name`` as given where that is no deeper)."""
+        level = self.config.deeper_relaxation
+        relaxed = f"{fallback_name(level)}, deeper"
+        rec.degradations.append(relaxed)
+        if left <= 0:
+            notes.append(f"{relaxed}: replanning budget spent")
+            rec.budget_exhausted = True
+            return plan, name, left
+        planner = self._planner_for(level)
+        try:
+            deeper = planner.plan(
+                self.terrain,
+                (q, qd),
+                self._stance,
+                horizon=n,
+                previous_plan=previous,
+                max_evaluations=None if previous is None else min(left, cap),
+            )
+        except PlanningError as exc:
+            left -= exc.evaluations - exc.beam_evaluations
+            rec.plan_evaluations += exc.evaluations
+            rec.budget_exhausted |= exc.budget_exhausted
+            notes.append(f"{relaxed}: {exc}")
+            if len(exc.partial) <= len(plan.steps):
+                return plan, name, left
+            return (
+                Plan(exc.partial, self.robot, planner.config),
+                f"{relaxed}, shorter horizon",
+                left,
+            )
+        left -= deeper.evaluations - deeper.beam_evaluations
+        rec.plan_evaluations += deeper.evaluations
+        return deeper, relaxed, left
 
     def _previous_steps(self, first: bool, new_step: bool) -> tuple[list[StepPlan], int]:
         """What is left of the previous plan for the current step, and its offset."""

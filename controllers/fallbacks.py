@@ -15,6 +15,7 @@ __all__ = [
     "TUBE_FALLBACKS",
     "fallback_items",
     "fallback_name",
+    "relaxation_item",
 ]
 
 #: the named degradations of ``ControllerConfig.fallbacks`` (the others are relaxations)
@@ -41,7 +42,7 @@ TUBE_FALLBACKS: tuple = (
 )
 
 
-def fallback_items(raw: Any) -> tuple:
+def fallback_items(raw: Any, field: str = "fallbacks") -> tuple:
     """``ControllerConfig.fallbacks`` in its stored form: names, and relaxations as sorted
     ``(field, value)`` pairs.
 
@@ -49,6 +50,7 @@ def fallback_items(raw: Any) -> tuple:
         raw: a sequence whose items are ``"previous plan"``, ``"least violation"`` or a
             mapping (or ``(field, value)`` pairs) of :class:`PlannerConfig` fields to relaxed
             values.
+        field: the :class:`ControllerConfig` field the errors name.
 
     Raises:
         ValueError: an item of another kind, an unknown field or a non-finite value.
@@ -58,36 +60,57 @@ def fallback_items(raw: Any) -> tuple:
         "PlannerConfig fields to relaxed values"
     )
     if isinstance(raw, (str, bytes)) or not hasattr(raw, "__iter__"):
-        raise ValueError(f"ControllerConfig.fallbacks = {raw!r}; allowed: {allowed}")
+        raise ValueError(f"ControllerConfig.{field} = {raw!r}; allowed: {allowed}")
     out: list = []
     planner_fields = set(PlannerConfig.__dataclass_fields__)
     for item in raw:
         if isinstance(item, str):
             if item not in NAMED_FALLBACKS:
-                raise ValueError(f"ControllerConfig.fallbacks: unknown item {item!r}; {allowed}")
+                raise ValueError(f"ControllerConfig.{field}: unknown item {item!r}; {allowed}")
             out.append(item)
             continue
         try:
             pairs = dict(item.items() if hasattr(item, "items") else item)
         except (TypeError, ValueError):
             raise ValueError(
-                f"ControllerConfig.fallbacks: bad item {item!r}; allowed: {allowed}"
+                f"ControllerConfig.{field}: bad item {item!r}; allowed: {allowed}"
             ) from None
         bad = sorted(set(pairs) - planner_fields)
         if bad or not pairs:
             raise ValueError(
-                f"ControllerConfig.fallbacks: relaxation {item!r} names no or unknown "
+                f"ControllerConfig.{field}: relaxation {item!r} names no or unknown "
                 f"PlannerConfig fields {bad}"
             )
         out.append(
             tuple(
                 sorted(
-                    (str(k), real_setting(f"ControllerConfig.fallbacks: {k}", v))
+                    (str(k), real_setting(f"ControllerConfig.{field}: {k}", v))
                     for k, v in pairs.items()
                 )
             )
         )
     return tuple(out)
+
+
+def relaxation_item(raw: Any) -> tuple:
+    """``ControllerConfig.deeper_relaxation`` in its stored form: one relaxation as sorted
+    ``(field, value)`` pairs, or ``()`` for none.
+
+    Args:
+        raw: a mapping (or ``(field, value)`` pairs) of :class:`PlannerConfig` fields to
+            relaxed values; empty or None for none.
+
+    Raises:
+        ValueError: a named degradation, an unknown field or a non-finite value.
+    """
+    if raw is None or (hasattr(raw, "__len__") and not isinstance(raw, str) and len(raw) == 0):
+        return ()
+    if isinstance(raw, (str, bytes)):
+        raise ValueError(
+            f"ControllerConfig.deeper_relaxation = {raw!r}; allowed: a mapping of "
+            "PlannerConfig fields to relaxed values"
+        )
+    return fallback_items((raw,), "deeper_relaxation")[0]
 
 
 def fallback_name(item: Any) -> str:

@@ -64,9 +64,11 @@ class StepRecord:
             actuator limit.
         fallback: None, ``"shorter horizon"`` (planning failed beyond the second step; the
             look-ahead is cut there), a relaxation (``"relaxed: ..."``, possibly followed by
-            ``", shorter horizon"``), ``"previous plan"``, ``"least violation"``, ``"PD on the
-            last planned step"`` or ``"zero input"`` (see the module docstring); reason: the
-            planning errors of the degradations tried (``" | "`` between them).
+            ``", shorter horizon"``; ``"relaxed: ..., deeper"`` where
+            ``ControllerConfig.deeper_relaxation`` planned further than the full problem),
+            ``"previous plan"``, ``"least violation"``, ``"PD on the last planned step"`` or
+            ``"zero input"`` (see the module docstring); reason: the planning errors of the
+            degradations tried (``" | "`` between them).
         plan_evaluations: step evaluations the planner calls of the step spent (all
             degradations together; see :attr:`PlannerConfig.max_evaluations`).
         budget_exhausted: a planner call of the step was cut by its search budget.

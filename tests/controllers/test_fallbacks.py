@@ -102,6 +102,44 @@ def test_degradation_order_is_configurable_and_validated():
         TransverseController("paper", "flat", {"fallbacks": [{"torque_fraction": 1.5}]})
 
 
+def test_a_shorter_look_ahead_is_planned_again_under_the_deeper_relaxation(gait):
+    """Where the full problem plans only the steps before a rise it cannot climb (a shorter
+    look-ahead, the dead end it would walk into), ``deeper_relaxation`` plans the whole
+    look-ahead under its relaxation, which is tracked as a relaxed plan; footsteps the full
+    problem plans whole are untouched."""
+    relax = {"fallbacks": [{"torque_fraction": 0.8}], **ROOMY}
+    runs = {}
+    for name, extra in (("plain", {}), ("deeper", {"deeper_relaxation": {"torque_fraction": 0.8}})):
+        out, _ = walk(RISE, gait, ControllerConfig(**relax, **extra), {**TIGHT, **ROOMY_PLANNER})
+        assert out["failure"] is None and len(out["impacts"]) >= 5
+        runs[name] = out["records"]
+    first_plain, first = runs["plain"][0], runs["deeper"][0]
+    assert first_plain.fallback == "shorter horizon" and not first_plain.pd_feedback
+    assert first_plain.reason.startswith("full problem: planning failed at step 3")
+    assert first.fallback == "relaxed: torque_fraction=0.8, deeper"
+    assert first.degradations == ["full problem", "relaxed: torque_fraction=0.8, deeper"]
+    assert first.reason == first_plain.reason  # the full problem's failure, nothing else
+    assert first.pd_feedback  # a relaxed plan: PD on y
+    for r in runs["deeper"]:
+        if r.fallback is None:
+            assert r.degradations == ["full problem"]
+    assert sum(r.fallback is None for r in runs["deeper"]) >= 3
+
+
+def test_the_deeper_relaxation_is_validated():
+    cfg = ControllerConfig(deeper_relaxation={"torque_fraction": 1.0, "duration_max": 3.0})
+    assert cfg.deeper_relaxation == (("duration_max", 3.0), ("torque_fraction", 1.0))
+    assert ControllerConfig.from_dict(cfg.to_dict()) == cfg
+    assert (
+        ControllerConfig().deeper_relaxation
+        == ()
+        == ControllerConfig(deeper_relaxation=None).deeper_relaxation
+    )
+    for bad in ("least violation", {"no_such_field": 1.0}, {"torque_fraction": float("nan")}):
+        with pytest.raises(ValueError, match="ControllerConfig.deeper_relaxation"):
+            ControllerConfig(deeper_relaxation=bad)
+
+
 def test_a_stance_foot_between_foothold_windows_walks_on_with_relaxed_riser_margins(gait):
     """Two 3 cm stairs down, the first riser 0.10 m ahead: with the full riser margins no
     problem has a foothold at the first step and the controller goes limp (zero input); the
