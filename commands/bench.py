@@ -25,6 +25,7 @@ from rich.table import Table
 from commands.cli import CONTROLLER_KERNELS, SIMULATOR_KERNELS, announce_compilation, int_range
 from configs import CONFIG_DIR
 from controllers.controller import PAPER_WEIGHTS, TransverseController
+from controllers.fallbacks import DEFAULT_FALLBACKS
 from controllers.feedback import feedback_law
 from controllers.gains import horizon_gains, step_models
 from controllers.observer import HighGainObserver, observer_update
@@ -361,23 +362,27 @@ def planner_section(args: argparse.Namespace) -> list[Row]:
     episodes = 2 if args.quick else 6
     for difficulty in (1.0, 2.0):
         rows += _closed_loop_replanning(episodes, difficulty)
-    # the planner's option, against the default above on the same courses
+    # the planner's and the controller's options, against the defaults above on the same courses
     rows += _closed_loop_replanning(episodes, 1.0, {"gauss_newton_scaling": 1})
+    last = [f for f in DEFAULT_FALLBACKS if not isinstance(f, str)][-1]  # the last relaxation
+    deeper = {"deeper_relaxation": dict(last)}
+    rows += _closed_loop_replanning(episodes, 2.0, controller=deeper)
     return rows
 
 
 def _closed_loop_replanning(
-    episodes: int, difficulty: float, planner: dict | None = None
+    episodes: int, difficulty: float, planner: dict | None = None, controller: dict | None = None
 ) -> list[Row]:
     """Replanning per footstep of the reference policy (sensors, observer, replanning at every
     touchdown) on ``CompassGaitRough-v0`` at ``difficulty``, evaluation seeds 1,001,000 on:
     median, 95th and 99th percentile over the footsteps of ``episodes`` episodes (the planner
     call, degradations included); the env steps per second of the whole loop (policy and env)
     against the bare env on the same courses under zero input, in the same run; and the time
-    of its online identification per fit (median, 95th percentile, largest). ``planner``:
-    changes to the robot's planner defaults (named in the rows)."""
+    of its online identification per fit (median, 95th percentile, largest). ``planner``,
+    ``controller``: changes to the robot's planner and controller defaults (named in the
+    rows)."""
     env = gym.make("roughwalk/CompassGaitRough-v0", difficulty=difficulty)
-    policy = ReferencePolicy(env, planner=planner)
+    policy = ReferencePolicy(env, config=controller, planner=planner)
     times: list[float] = []
     fits: list[float] = []
     steps, t0 = 0, time.perf_counter()
@@ -410,6 +415,8 @@ def _closed_loop_replanning(
     where = f"reference policy, CompassGaitRough-v0 difficulty {difficulty:g} ({episodes} episodes)"
     if planner:
         where += ", planner " + ", ".join(f"{k}={v}" for k, v in planner.items())
+    if controller:
+        where += ", controller " + ", ".join(f"{k}={_setting(v)}" for k, v in controller.items())
     return [
         (
             f"replanning per footstep in closed loop (median / p95 / p99): {where}",
@@ -428,6 +435,13 @@ def _closed_loop_replanning(
             "ms",
         ),
     ]
+
+
+def _setting(value: object) -> str:
+    """A setting as a row names it: a mapping as ``{field: value, ...}``."""
+    if isinstance(value, dict):
+        return "{" + ", ".join(f"{k}: {v:g}" for k, v in value.items()) + "}"
+    return str(value)
 
 
 #: benchmark sections, run in order: (title, function)
