@@ -37,6 +37,7 @@ __all__ = [
     "StepOutputs",
     "StepScalars",
     "StepSettings",
+    "allocate_outputs",
     "evaluate_shapes",
     "evaluate_steps",
     "pack",
@@ -137,22 +138,6 @@ class StepOutputs(NamedTuple):
     thetadot_plus: np.ndarray  # (B,) start theta_dot [rad/s]
     gain: np.ndarray  # (B,) step-to-step gain of theta_dot^2 (periodic gait; else NaN)
     residuals: np.ndarray  # (B, R) the cost's terms: cost = sum of their squares
-
-    @classmethod
-    def allocate(cls, rows: int, columns: int, nodes: int, order: int) -> StepOutputs:
-        """Uninitialised outputs for ``rows`` shapes, ``columns`` constraints, ``nodes`` nodes
-        and Bezier order ``order``."""
-        per_row = len(cls._fields) - 4
-        block = np.empty(rows * (columns + 2 * nodes + per_row))
-        n1, n2 = rows * columns, rows * (columns + nodes)
-        n3 = rows * (columns + 2 * nodes)
-        return cls(
-            block[:n1].reshape(rows, columns),
-            block[n1:n2].reshape(rows, nodes),
-            block[n2:n3].reshape(rows, nodes),
-            *block[n3:].reshape(per_row, rows),
-            np.zeros((rows, residual_count(nodes, order))),
-        )
 
 
 @_jit
@@ -421,10 +406,12 @@ def pack(G, offsets, block, out):
 
 
 @_jit
-def _outputs(rows, columns, nodes, order):
-    """:meth:`StepOutputs.allocate` inside compiled code."""
+def allocate_outputs(rows, columns, nodes, order):
+    """:class:`StepOutputs` for ``rows`` shapes, ``columns`` constraints, ``nodes`` nodes and
+    Bezier order ``order``: the constraints NaN until the kernel writes them (a column left
+    unwritten would read as violated), the residuals zero, the rest uninitialised."""
     return StepOutputs(
-        np.empty((rows, columns)),
+        np.full((rows, columns), np.nan),
         np.empty((rows, nodes)),
         np.empty((rows, nodes)),
         np.empty(rows),
@@ -441,10 +428,10 @@ def _outputs(rows, columns, nodes, order):
 
 
 @_jit
-def evaluate_shapes(P, free, slope_in, thd_in, common, problem):
-    """:func:`evaluate_steps` for steps (not the periodic gait) given by their free
-    coefficients ``a_2 .. a_{M-1}`` (``free``, ``(B, M - 2)``), and :func:`pack`: one compiled
-    call for what an optimiser asks of a batch.
+def evaluate_shapes(P, free, slope_in, thd_in, periodic, common, problem):
+    """:func:`evaluate_steps` for steps given by their free coefficients ``a_2 .. a_{M-1}``
+    (``free``, ``(B, M - 2)``), and :func:`pack`: one compiled call for what an optimiser asks
+    of a batch (``periodic``: the periodic gait's, ``thd_in`` ignored).
 
     ``common``: ``(use_ref, shape_ref, cfg, grids, block)``, what every step problem of a
     planner shares (as :func:`evaluate_steps` takes them; ``block``: :func:`pack`'s);
@@ -472,8 +459,8 @@ def evaluate_shapes(P, free, slope_in, thd_in, common, problem):
         sl = slope_in[b] if slope_in.size else slope
         a[b, 1] = second_coeff(a0, sl, theta_plus, theta_minus, m)
         thd[b] = thd_in[b] if thd_in.size else thd_plus
-    out = _outputs(nb, offsets[-1], grids.nodes.size, m)
-    evaluate_steps(P, a, thd, False, use_ref, shape_ref, cfg, step, grids, ground, col, out)
+    out = allocate_outputs(nb, offsets[-1], grids.nodes.size, m)
+    evaluate_steps(P, a, thd, periodic, use_ref, shape_ref, cfg, step, grids, ground, col, out)
     g = np.empty((nb, packed))
     pack(out.constraints, offsets, block, g)
     return a, out, g
@@ -484,7 +471,7 @@ def step_values(P, free, common, problem):
     """The cost ``(B,)`` and packed constraints ``(B, packed)`` of :func:`evaluate_shapes` (its
     arguments, the start given by the problem): what each SLSQP evaluation needs, and no more
     crosses back to Python."""
-    _, out, g = evaluate_shapes(P, free, _EMPTY, _EMPTY, common, problem)
+    _, out, g = evaluate_shapes(P, free, _EMPTY, _EMPTY, False, common, problem)
     return out.cost, g
 
 
@@ -496,9 +483,9 @@ def pair_values(P, free, n, common, first, second):
     ``theta_dot``, the impact's, row by row). ``common``, ``first``, ``second``: as
     :func:`evaluate_shapes` takes them (the second's start in its ``fixed`` is ignored). The
     cost is the sum of the two steps'."""
-    _, o1, g1 = evaluate_shapes(P, free[:, :n], _EMPTY, _EMPTY, common, first)
+    _, o1, g1 = evaluate_shapes(P, free[:, :n], _EMPTY, _EMPTY, False, common, first)
     _, o2, g2 = evaluate_shapes(
-        P, free[:, n:], o1.slope_plus, o1.delta * o1.thetadot_minus, common, second
+        P, free[:, n:], o1.slope_plus, o1.delta * o1.thetadot_minus, False, common, second
     )
     nb = free.shape[0]
     g = np.empty((nb, g1.shape[1] + g2.shape[1]))

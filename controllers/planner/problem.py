@@ -35,11 +35,11 @@ from envs.physics import model
 from envs.physics.params import RobotParams
 
 from .. import reduced as rd
-from ..bezier import bernstein_basis, chord_coefficients, second_coeff
+from ..bezier import bernstein_basis, chord_coefficients
 from . import kernel
 from .config import PlannerConfig
 from .footholds import TerrainMap
-from .kernel import StepGrids, StepGround, StepOutputs, StepScalars, StepSettings
+from .kernel import StepGrids, StepGround, StepScalars, StepSettings
 from .plan import PeriodicGait
 from .slsqp import minimize_slsqp
 
@@ -297,26 +297,6 @@ class StepEvaluator:
         )
         self.settings = StepSettings(*(float(v) for v in settings))
 
-    def coeffs(self, fx: FixedStep, free: np.ndarray, periodic: bool = False) -> np.ndarray:
-        """Coefficients ``a_0 .. a_M`` for free coefficients ``free`` (shape ``(k,)`` or a batch
-        ``(B, k)``; the result has the same leading shape). With ``periodic``, ``a_1`` gives the
-        step's own post-impact slope (a period-one gait), else ``fx.slope`` (the compiled
-        evaluation of steps, :func:`kernel.evaluate_shapes`, assembles them itself)."""
-        m = self.cfg.order
-        span = fx.theta_minus - fx.theta_plus
-        x = np.asarray(free, dtype=np.float64)
-        a = np.empty(x.shape[:-1] + (m + 1,))
-        a[..., 0] = fx.a0
-        a[..., 2:m] = x
-        a[..., m] = fx.a_last
-        sl = fx.slope
-        if periodic:  # the step's own post-impact direction
-            _, sl = rd.impact_along_constraint(
-                self.P, a[..., m], m * (a[..., m] - a[..., m - 1]) / span
-            )
-        a[..., 1] = second_coeff(fx.a0, sl, fx.theta_plus, fx.theta_minus, m)
-        return a
-
     def evaluate(self, fx: FixedStep, free: np.ndarray, periodic: bool = False) -> dict[str, Any]:
         """Everything about the step with free coefficients ``free`` (shape ``(k,)``).
 
@@ -462,18 +442,22 @@ class StepEvaluator:
 
     def _evaluate(self, fx, free, periodic, slope_in, thd_in) -> dict[str, Any]:
         free = self._free(free)
-        scalars, ground, layout, shape_ref, problem = self._problem_data(fx, periodic)
-        if periodic:
-            a, out, g = self._evaluate_periodic(fx, free, scalars, ground, layout, shape_ref)
-        else:
-            a, out, g = kernel.evaluate_shapes(
-                self.P,
-                free,
-                _NONE if slope_in is None else np.ascontiguousarray(slope_in, dtype=np.float64),
-                _NONE if thd_in is None else np.ascontiguousarray(thd_in, dtype=np.float64),
-                self._common(shape_ref),
-                problem,
+        _, _, layout, shape_ref, problem = self._problem_data(fx, periodic)
+        if periodic:  # a_1 gives the step's own post-impact slope (a period-one gait)
+            m, span = self.cfg.order, fx.theta_minus - fx.theta_plus
+            a_last = np.full(free.shape[0], fx.a_last)
+            _, slope_in = rd.impact_along_constraint(
+                self.P, a_last, m * (a_last - free[:, -1]) / span
             )
+        a, out, g = kernel.evaluate_shapes(
+            self.P,
+            free,
+            _NONE if slope_in is None else np.ascontiguousarray(slope_in, dtype=np.float64),
+            _NONE if thd_in is None or periodic else np.ascontiguousarray(thd_in, dtype=np.float64),
+            periodic,
+            self._common(shape_ref),
+            problem,
+        )
         return {
             "a": a,
             "f": out.thetadot_sq,
@@ -491,31 +475,6 @@ class StepEvaluator:
             "gain": out.gain,
             "residuals": out.residuals,
         }
-
-    def _evaluate_periodic(self, fx, free, scalars, ground, layout, shape_ref):
-        """``(a, outputs, g)`` of periodic-gait shapes (the start speed is the fixed point)."""
-        nb = free.shape[0]
-        grids = self.grids
-        a = np.ascontiguousarray(self.coeffs(fx, free, True))
-        out = StepOutputs.allocate(nb, int(layout.offsets[-1]), grids.nodes.size, self.cfg.order)
-        thd_plus = np.full(nb, float(fx.thetadot_plus))  # (ignored: the fixed point is used)
-        kernel.evaluate_steps(
-            self.P,
-            a,
-            thd_plus,
-            True,
-            self.ref is not None,
-            shape_ref,
-            self.settings,
-            scalars,
-            grids,
-            ground,
-            layout.columns,
-            out,
-        )
-        g = np.empty((nb, layout.packed))
-        kernel.pack(out.constraints, layout.offsets, _PACK_BLOCK, g)
-        return a, out, g
 
 
 def shape_guess(rel: np.ndarray, a0: float, a_last: float, order: int) -> np.ndarray:
