@@ -32,6 +32,7 @@ from .. import reduced as rd
 from ..bezier import bezier_on_basis, chord_coefficients, second_coeff
 
 __all__ = [
+    "NO_ROWS",
     "StepGrids",
     "StepGround",
     "StepOutputs",
@@ -49,7 +50,8 @@ __all__ = [
 
 
 _jit = njit(cache=True, error_model="numpy")
-_EMPTY = np.empty(0)  # no row-by-row start (evaluate_shapes)
+#: no row-by-row start slope or ``theta_dot`` (:func:`evaluate_shapes`: the step's own)
+NO_ROWS = np.empty(0)
 
 
 class StepSettings(NamedTuple):
@@ -471,7 +473,7 @@ def step_values(P, free, common, problem):
     """The cost ``(B,)`` and packed constraints ``(B, packed)`` of :func:`evaluate_shapes` (its
     arguments, the start given by the problem): what each SLSQP evaluation needs, and no more
     crosses back to Python."""
-    _, out, g = evaluate_shapes(P, free, _EMPTY, _EMPTY, False, common, problem)
+    _, out, g = evaluate_shapes(P, free, NO_ROWS, NO_ROWS, False, common, problem)
     return out.cost, g
 
 
@@ -483,7 +485,7 @@ def pair_values(P, free, n, common, first, second):
     ``theta_dot``, the impact's, row by row). ``common``, ``first``, ``second``: as
     :func:`evaluate_shapes` takes them (the second's start in its ``fixed`` is ignored). The
     cost is the sum of the two steps'."""
-    _, o1, g1 = evaluate_shapes(P, free[:, :n], _EMPTY, _EMPTY, False, common, first)
+    _, o1, g1 = evaluate_shapes(P, free[:, :n], NO_ROWS, NO_ROWS, False, common, first)
     _, o2, g2 = evaluate_shapes(
         P, free[:, n:], o1.slope_plus, o1.delta * o1.thetadot_minus, False, common, second
     )

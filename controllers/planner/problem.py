@@ -71,7 +71,6 @@ _PACK_BLOCK = 8  # long constraint groups reach SLSQP as minima over blocks of g
 _STALL_ITERATIONS, _STALL_WINDOW, _STALL_GAIN, _STALL_VIOLATION = 25, 5, 0.95, 1e-4
 _FD_STEP = math.sqrt(np.finfo(float).eps)  # forward-difference step of the Jacobians
 _PROBLEMS_KEPT = 16  # step problems whose kernel data a StepEvaluator keeps
-_NONE = np.empty(0)  # no row-by-row override (kernel.evaluate_shapes)
 # the scaled solves' eigenvalue floor, relative to the largest: only a guard against a
 # singular model (the eigenvalues of the paper robot's step models span a factor of about 40)
 _SCALING_FLOOR = 1e-6
@@ -329,7 +328,7 @@ class StepEvaluator:
         """The costs ``(B,)`` and packed constraints ``(B, m)`` of :meth:`evaluate_batch` (a
         step, not the periodic gait) for the free coefficients ``free`` (``(B, k)``), in one
         compiled call: the same numbers, nothing else."""
-        _, _, _, shape_ref, problem = self._problem_data(fx, False)
+        _, shape_ref, problem = self._problem_data(fx, False)
         return kernel.step_values(self.P, self._free(free), self._common(shape_ref), problem)
 
     def pair_values(
@@ -339,8 +338,8 @@ class StepEvaluator:
         steps' free coefficients, ``(B, 2 k)``): the sum of their costs and their constraints
         side by side, the second step starting where the first ends row by row (the impact's
         ``theta_dot`` and slope; ``fx2``'s start is ignored)."""
-        _, _, _, shape_ref, first = self._problem_data(fx, False)
-        second = self._problem_data(fx2, False)[4]
+        _, shape_ref, first = self._problem_data(fx, False)
+        second = self._problem_data(fx2, False)[2]
         return kernel.pair_values(
             self.P, self._free(free, 2), self.cfg.order - 2, self._common(shape_ref), first, second
         )
@@ -379,11 +378,11 @@ class StepEvaluator:
         return out
 
     def _problem_data(self, fx: FixedStep, periodic: bool) -> tuple:
-        """What the kernel needs of the step problem besides its shapes: ``(scalars, ground,
-        layout, shape_ref, problem)``, the same for every batch of one problem (kept for the
-        last few problems: an optimisation evaluates the same one, or a pair, many times);
-        ``problem``: the step as :func:`kernel.evaluate_shapes` takes it, ``(fixed, scalars,
-        ground, columns, offsets, packed)``."""
+        """What the kernel needs of the step problem besides its shapes: ``(layout,
+        shape_ref, problem)``, the same for every batch of one problem (kept for the last few
+        problems: an optimisation evaluates the same one, or a pair, many times); ``problem``:
+        the step as :func:`kernel.evaluate_shapes` takes it, ``(fixed, scalars, ground,
+        columns, offsets, packed)``."""
         key = (id(fx), periodic, self.wscale, id(self.ref))
         hit = self._problems.get(key)
         if hit is not None and hit[0] is fx and hit[1] is self.ref:
@@ -433,8 +432,7 @@ class StepEvaluator:
             layout.offsets,
             layout.packed,
         )
-        shape_ref = np.ascontiguousarray(shape_ref, dtype=np.float64)
-        data = (scalars, ground, layout, shape_ref, problem)
+        data = (layout, np.ascontiguousarray(shape_ref, dtype=np.float64), problem)
         if len(self._problems) >= _PROBLEMS_KEPT:
             self._problems.clear()
         self._problems[key] = (fx, self.ref, data)
@@ -442,7 +440,7 @@ class StepEvaluator:
 
     def _evaluate(self, fx, free, periodic, slope_in, thd_in) -> dict[str, Any]:
         free = self._free(free)
-        _, _, layout, shape_ref, problem = self._problem_data(fx, periodic)
+        layout, shape_ref, problem = self._problem_data(fx, periodic)
         if periodic:  # a_1 gives the step's own post-impact slope (a period-one gait)
             m, span = self.cfg.order, fx.theta_minus - fx.theta_plus
             a_last = np.full(free.shape[0], fx.a_last)
@@ -452,8 +450,12 @@ class StepEvaluator:
         a, out, g = kernel.evaluate_shapes(
             self.P,
             free,
-            _NONE if slope_in is None else np.ascontiguousarray(slope_in, dtype=np.float64),
-            _NONE if thd_in is None or periodic else np.ascontiguousarray(thd_in, dtype=np.float64),
+            kernel.NO_ROWS
+            if slope_in is None
+            else np.ascontiguousarray(slope_in, dtype=np.float64),
+            kernel.NO_ROWS
+            if thd_in is None or periodic
+            else np.ascontiguousarray(thd_in, dtype=np.float64),
             periodic,
             self._common(shape_ref),
             problem,
