@@ -336,6 +336,12 @@ PAPER_WEIGHTS: dict[str, Any] = {
 }
 
 
+def _charged(outcome: Plan | PlanningError) -> int:
+    """The step evaluations a planner call charges to a replanning's shared budget (the beam
+    search's have their own)."""
+    return outcome.evaluations - outcome.beam_evaluations
+
+
 class TransverseController:
     """Receding-horizon transverse-linearization controller (state feedback).
 
@@ -626,17 +632,10 @@ class TransverseController:
                         self.terrain, (q, qd), self._stance, horizon=2, previous_plan=previous
                     )
                 else:
-                    plan = planner.plan(
-                        self.terrain,
-                        (q, qd),
-                        self._stance,
-                        horizon=n,
-                        previous_plan=previous,
-                        max_evaluations=None if previous is None else min(left, cap),
-                    )
-                    left -= plan.evaluations - plan.beam_evaluations
+                    plan = self._budgeted_plan(planner, q, qd, n, previous, min(left, cap))
+                    left -= _charged(plan)
             except PlanningError as exc:
-                left -= exc.evaluations - exc.beam_evaluations
+                left -= _charged(exc)
                 rec.plan_evaluations += exc.evaluations
                 rec.budget_exhausted |= exc.budget_exhausted
                 notes.append(f"{name}: {exc}")
@@ -710,16 +709,9 @@ class TransverseController:
             return plan, name, left
         planner = self._planner_for(level)
         try:
-            deeper = planner.plan(
-                self.terrain,
-                (q, qd),
-                self._stance,
-                horizon=n,
-                previous_plan=previous,
-                max_evaluations=None if previous is None else min(left, cap),
-            )
+            deeper = self._budgeted_plan(planner, q, qd, n, previous, min(left, cap))
         except PlanningError as exc:
-            left -= exc.evaluations - exc.beam_evaluations
+            left -= _charged(exc)
             rec.plan_evaluations += exc.evaluations
             rec.budget_exhausted |= exc.budget_exhausted
             notes.append(f"{relaxed}: {exc}")
@@ -730,9 +722,33 @@ class TransverseController:
                 f"{relaxed}, shorter horizon",
                 left,
             )
-        left -= deeper.evaluations - deeper.beam_evaluations
+        left -= _charged(deeper)
         rec.plan_evaluations += deeper.evaluations
         return deeper, relaxed, left
+
+    def _budgeted_plan(
+        self,
+        planner: GaitPlanner,
+        q: np.ndarray,
+        qd: np.ndarray,
+        n: int,
+        previous: Plan | None,
+        budget: int,
+    ) -> Plan:
+        """``planner``'s plan of ``n`` steps from ``(q, qd)`` within ``budget`` step
+        evaluations (its whole search at reset, with no previous plan to fall back on).
+
+        Raises:
+            PlanningError: as :meth:`GaitPlanner.plan`.
+        """
+        return planner.plan(
+            self.terrain,
+            (q, qd),
+            self._stance,
+            horizon=n,
+            previous_plan=previous,
+            max_evaluations=None if previous is None else budget,
+        )
 
     def _previous_steps(self, first: bool, new_step: bool) -> tuple[list[StepPlan], int]:
         """What is left of the previous plan for the current step, and its offset."""
