@@ -592,10 +592,11 @@ class BatchProblem:
         if todo:
             if self.budget is not None:
                 self.budget.spend(len(todo))
+            rows = X[todo] if len(todo) < len(keys) else X
             if self.values is None or payload:
-                cost, g, ev = self.fn(X[todo] if len(todo) < len(keys) else X)
+                cost, g, ev = self.fn(rows)
             else:
-                (cost, g), ev = self.values(X[todo] if len(todo) < len(keys) else X), None
+                (cost, g), ev = self.values(rows), None
             for r, i in enumerate(todo):
                 self.cache[keys[i]] = (float(cost[r]), g[r], ev, r)
             if len(todo) == len(keys):
