@@ -151,6 +151,14 @@ def residual_count(nodes: int, order: int) -> int:
 
 
 @_jit
+def cost_term(res, i, weight, r):
+    """The cost term ``weight * r^2`` of the error ``r``; writes its residual, ``sqrt(weight)
+    r``, to ``res[i]`` (the cost is the sum of the residuals' squares)."""
+    res[i] = math.sqrt(weight) * r
+    return weight * r**2
+
+
+@_jit
 def evaluate_steps(
     P, a, thd_plus_in, periodic, use_ref, shape_ref, cfg, step, grids, ground, col, out
 ):
@@ -337,32 +345,31 @@ def evaluate_steps(
         if periodic:
             G[b, col.periodic] = 1.0 - gain - 0.02
             G[b, col.periodic + 1] = td2 / (min_thd * min_thd) - 1.0
-        # cost: speed; with a reference gait also the end speed, post-impact slope and shape
+        # cost: speed; with a reference gait also the end speed, post-impact slope and shape;
+        # each term's error once, for the cost and for its residual (out.residuals)
         v = (step.foot_x - xs) / T
         vt = step.v_target
-        cost = cfg.w_speed * ((v - vt) / vt) ** 2
-        res = out.residuals[b]  # the same terms, square roots of their weights inside
-        res[0] = math.sqrt(cfg.w_speed) * ((v - vt) / vt)
+        res = out.residuals[b]
+        cost = cost_term(res, 0, cfg.w_speed, (v - vt) / vt)
         if not use_ref:
             su = 0.0
             for k in range(nn):
-                su += (U[b, k] / cfg.u_max) ** 2
-                res[1 + k] = math.sqrt(cfg.w_torque / nn) * (U[b, k] / cfg.u_max)
+                r = U[b, k] / cfg.u_max
+                su += r**2
+                res[1 + k] = math.sqrt(cfg.w_torque / nn) * r
             cost += cfg.w_torque * su / nn
         else:
             ws = step.wscale
             dr = step.delta_ref * step.thetadot_minus_ref
-            cost += ws * cfg.w_end * ((delta * thd[e] - dr) / dr) ** 2
-            cost += ws * cfg.w_slope * (slope_plus - step.slope_ref) ** 2
-            res[1] = math.sqrt(ws * cfg.w_end) * ((delta * thd[e] - dr) / dr)
-            res[2] = math.sqrt(ws * cfg.w_slope) * (slope_plus - step.slope_ref)
+            cost += cost_term(res, 1, ws * cfg.w_end, (delta * thd[e] - dr) / dr)
+            cost += cost_term(res, 2, ws * cfg.w_slope, slope_plus - step.slope_ref)
             chord = a[b, m] - a[b, 0]
             den = max(abs(chord), 1e-6)
             sh = 0.0
             for i in range(2, m):
-                rel = (a[b, i] - chord_coefficients(a[b, 0], a[b, m], i, m)) / den
-                sh += (rel - shape_ref[i]) ** 2
-                res[1 + i] = math.sqrt(ws * cfg.w_shape) * (rel - shape_ref[i])
+                r = (a[b, i] - chord_coefficients(a[b, 0], a[b, m], i, m)) / den - shape_ref[i]
+                sh += r**2
+                res[1 + i] = math.sqrt(ws * cfg.w_shape) * r
             cost += ws * cfg.w_shape * sh
         out.cost[b] = cost
         out.duration[b] = T
