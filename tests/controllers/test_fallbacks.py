@@ -135,6 +135,14 @@ def test_the_deeper_relaxation_is_validated():
         == ()
         == ControllerConfig(deeper_relaxation=None).deeper_relaxation
     )
+    # the paper robot's default (configs/controller/paper.yaml), switched off with an empty one
+    paper = ControllerConfig.for_robot("paper")
+    assert paper.deeper_relaxation == (
+        ("duration_max", 3.0),
+        ("duration_min", 0.05),
+        ("torque_fraction", 1.0),
+    )
+    assert ControllerConfig.for_robot("paper", deeper_relaxation={}).deeper_relaxation == ()
     for bad in ("least violation", {"no_such_field": 1.0}, {"torque_fraction": float("nan")}):
         with pytest.raises(ValueError, match="ControllerConfig.deeper_relaxation"):
             ControllerConfig(deeper_relaxation=bad)
