@@ -28,6 +28,7 @@ from __future__ import annotations
 
 import csv
 import json
+import warnings
 import zipfile
 from collections import Counter
 from collections.abc import Sequence
@@ -41,7 +42,13 @@ import yaml
 
 import envs  # noqa: F401  (registers the roughwalk ids)
 from agents.config import EVAL_SEED_OFFSET, MAX_SEED, TEST_SEED, ConfigError
-from agents.policies import BASELINES, Policy, make_baseline_policy
+from agents.policies import (
+    BASELINES,
+    Policy,
+    base_settings,
+    make_baseline_policy,
+    settings_changes,
+)
 from agents.pretrained import resolve_model
 from agents.runs import atomic_write_stream, find_vecnormalize, load_vecnormalize
 from agents.trained import TrainedPolicy, load_policy
@@ -375,6 +382,33 @@ def load_trained(
     return policy
 
 
+class BaseChangedWarning(UserWarning):
+    """A trained agent is evaluated on a base policy whose settings differ from those it was
+    trained on (this release's defaults changed since; its manifest records the old ones)."""
+
+
+def warn_changed_base(policy_spec: str, manifest: dict[str, Any], env: gym.Env) -> list[str]:
+    """Warn (:class:`BaseChangedWarning`) when the base policies of ``env``'s wrappers differ
+    from those the run's ``manifest`` records (``base_settings``, written by ``roughwalk
+    train``; runs without them are not checked), naming the settings that changed; returns
+    them."""
+    recorded = manifest.get("base_settings")
+    if not recorded:
+        return []
+    changes = settings_changes(recorded, base_settings(env))
+    if changes:
+        shown = "; ".join(changes[:4]) + (
+            f"; and {len(changes) - 4} more" if len(changes) > 4 else ""
+        )
+        warnings.warn(
+            f"{policy_spec}: its base policy's settings differ from those it was trained on "
+            f"({shown}); to evaluate it on its own base, set them in its config's base_kwargs",
+            BaseChangedWarning,
+            stacklevel=2,
+        )
+    return changes
+
+
 def make_eval_env(
     policy_spec: str,
     env_id: str | None,
@@ -474,6 +508,7 @@ def make_eval_env(
     env = make_env(env_id, env_kwargs)
     if trained is not None:
         env = trained.wrap_env(env)
+        warn_changed_base(policy_spec, trained.manifest, env)
         if env.observation_space.shape != trained.model.observation_space.shape:
             raise ConfigError(
                 f"{policy_spec}: the model expects observations of shape "

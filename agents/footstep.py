@@ -99,8 +99,8 @@ class FootstepWrapper(gym.Wrapper, gym.utils.RecordConstructorArgs):
                 raise ValueError(f"adjust.{name} = {half!r}; allowed: a finite half-range > 0")
         self.adjust = {k: float(v) for k, v in adjust.items()}
         self.observe_state = bool(observe_state)
-        self.policy = make_baseline_policy("reference", env, **(base_kwargs or {}))
-        self.controller = self.policy.controller
+        self.base_policy = make_baseline_policy("reference", env, **(base_kwargs or {}))
+        self.controller = self.base_policy.controller
         self.configured = self.controller.planner.config
         self._base = np.array([getattr(self.configured, k) for k in self.adjust])
         self._lo = np.array([ADJUSTABLE[k][0] for k in self.adjust])
@@ -134,7 +134,7 @@ class FootstepWrapper(gym.Wrapper, gym.utils.RecordConstructorArgs):
     def _observe(self, obs: np.ndarray) -> np.ndarray:
         if not self.observe_state:
             return obs
-        parts = [np.asarray(obs, dtype=np.float64), estimate_features(self.policy.estimator)]
+        parts = [np.asarray(obs, dtype=np.float64), estimate_features(self.base_policy.estimator)]
         return np.concatenate(parts).astype(self.observation_space.dtype, copy=False)
 
     def reset(
@@ -143,7 +143,7 @@ class FootstepWrapper(gym.Wrapper, gym.utils.RecordConstructorArgs):
         """Reset the env and the reference controller (it plans its first step at the first
         tick, with the planner the first action sets)."""
         obs, info = self.env.reset(seed=seed, options=options)
-        self.policy.reset()
+        self.base_policy.reset()
         self.controller.adjust_planner()
         self._obs = obs
         self._footsteps = int(info.get("footsteps", 0))
@@ -157,7 +157,7 @@ class FootstepWrapper(gym.Wrapper, gym.utils.RecordConstructorArgs):
         terminated = truncated = False
         info: dict[str, Any] = {}
         while ticks < MAX_TICKS:
-            obs, reward, terminated, truncated, info = self.env.step(self.policy(obs))
+            obs, reward, terminated, truncated, info = self.env.step(self.base_policy(obs))
             total += float(reward)
             ticks += 1
             work += float(info.get("motor_work", 0.0))

@@ -65,3 +65,40 @@ def make_baseline_policy(name: str, env: gym.Env, **kwargs: Any) -> Policy:
     if name == "reference":
         return controllers.make_reference_policy(env, **kwargs)
     raise ValueError(f"unknown baseline policy {name!r}; allowed: {', '.join(BASELINES)}")
+
+
+def base_settings(env: gym.Env) -> list[dict[str, Any]]:
+    """The resolved settings (``controllers.ReferencePolicy.settings``) of the base policies
+    of ``env``'s wrappers (a residual's, a per-footstep agent's), outermost first, each with
+    its wrapper's class name; [] when no wrapper has one."""
+    out = []
+    while isinstance(env, gym.Wrapper):
+        base = getattr(env, "base_policy", None)
+        if base is not None and callable(getattr(base, "settings", None)):
+            out.append({"wrapper": type(env).__name__, **base.settings()})
+        env = env.env
+    return out
+
+
+def settings_changes(recorded: Any, current: Any, path: str = "") -> list[str]:
+    """Where ``current`` differs from ``recorded`` (nested mappings and lists in JSON types,
+    as :func:`base_settings` gives them), one ``"path: recorded, now current"`` per setting."""
+    if isinstance(recorded, dict) and isinstance(current, dict):
+        out = []
+        for key in dict.fromkeys([*recorded, *current]):
+            where = f"{path}.{key}" if path else str(key)
+            if key not in recorded:
+                out.append(f"{where}: absent, now {current[key]!r}")
+            elif key not in current:
+                out.append(f"{where}: {recorded[key]!r}, now absent")
+            else:
+                out += settings_changes(recorded[key], current[key], where)
+        return out
+    if isinstance(recorded, list) and isinstance(current, list) and len(recorded) == len(current):
+        if all(isinstance(r, dict) for r in recorded):  # one entry per base policy
+            return [
+                c
+                for i, r in enumerate(recorded)
+                for c in settings_changes(r, current[i], f"{path}[{i}]")
+            ]
+    return [] if recorded == current else [f"{path}: {recorded!r}, now {current!r}"]

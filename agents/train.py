@@ -3,7 +3,8 @@
 :func:`train` writes a new run folder ``<log_dir>/<config name>_s<seed>/`` (``..._2``,
 ``..._3``, ... when that exists: a run is never overwritten) holding:
 
-- ``manifest.json``: the resolved config, every seed used (training envs, evaluation courses),
+- ``manifest.json``: the resolved config and its base policy's settings (``base_settings``),
+  every seed used (training envs, evaluation courses),
   library versions, the command line, start/finish times, the status (``running``,
   ``interrupted``, ``finished``), the env steps asked (``n_timesteps``) and trained
   (``num_timesteps``) and any resumes and interruptions;
@@ -48,6 +49,7 @@ import yaml
 
 import envs  # noqa: F401  (registers the roughwalk ids, also in subprocesses)
 from agents.config import EVAL_SEED_OFFSET, AgentConfig, ConfigError
+from agents.policies import base_settings
 from agents.runs import (
     FINISHED,
     INTERRUPTED,
@@ -626,12 +628,28 @@ def _start_manifest(
         }
     )
     manifest.pop("finished", None)
+    if "base_settings" not in manifest:  # a resumed run keeps those it started with
+        manifest["base_settings"] = run_base_settings(cfg)
     manifest.setdefault("started", _now())
     manifest.setdefault("commands", []).append(" ".join(sys.argv))
     if point is not None:
         manifest.setdefault("resumed_from", []).append(str(point.path))
     write_manifest(run_dir, manifest)
     return manifest
+
+
+def run_base_settings(cfg: AgentConfig) -> list[dict[str, Any]]:
+    """The resolved settings of the base policies an agent of ``cfg`` acts on
+    (:func:`agents.policies.base_settings` of an evaluation env with its wrappers); [] for an
+    agent without one. A run's manifest records them, so that an evaluation on a release
+    whose defaults changed can say what its base no longer shares."""
+    if not cfg.wrapper_specs():
+        return []
+    env = cfg.wrap(gym.make(cfg.env_id, **cfg.env_kwargs))
+    try:
+        return base_settings(env)
+    finally:
+        env.close()
 
 
 def _interrupted(

@@ -4,7 +4,8 @@
 ``<log-dir>/<config name>_s<seed>/`` (``..._2``, ``..._3``, ... when that exists: a run is never
 overwritten) holding:
 
-- ``manifest.json``: the resolved config, every seed used (training envs, evaluation courses),
+- ``manifest.json``: the resolved config and its base policy's settings (``base_settings``),
+  every seed used (training envs, evaluation courses),
   library versions, the command line, start/finish times, the status and the env steps asked
   (``n_timesteps``) and trained (``num_timesteps``);
 - ``model.zip`` + ``vecnormalize.pkl``: the final agent and its observation statistics;

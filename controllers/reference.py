@@ -32,6 +32,7 @@ call never raises because of the robot's state.
 
 from __future__ import annotations
 
+import json
 import math
 import time
 from typing import Any
@@ -148,6 +149,7 @@ class ReferencePolicy:
                 "measures the leg length"
             )
         self.leg_margin = float(leg_margin)
+        self.odometry_error = float(odometry_error)
         self.identifier: SwingIdentifier | None = None
         if self.identify:
             self.identifier = SwingIdentifier(self.robot, est.dt, est.angle_sigma)
@@ -159,6 +161,28 @@ class ReferencePolicy:
         self.settle_time = float(settle_time)
         self.record_history = bool(record_history)
         self.reset()
+
+    def settings(self) -> dict[str, Any]:
+        """What the policy does, resolved: its controller's and planner's settings (every
+        field, the robot's defaults filled in) and its own options, in JSON types (a run
+        records its base policy's, ``agents.policies.base_settings``)."""
+        ctrl = self.controller
+        out: dict[str, Any] = {
+            "policy": type(self).__name__,
+            "controller": ctrl.config.to_dict(),
+            "planner": ctrl.configured_planner.config.to_dict(),
+            "observer_eps": float(self.estimator.observer.eps),
+            "localise": self.estimator.localise,
+            "mapping": self.estimator.mapping,
+            "odometry_error": self.odometry_error,
+            "identify": self.identify,
+            "leg_margin": self.leg_margin,
+            "settle_time": self.settle_time,
+        }
+        for gain in ("kp", "kd"):  # the PD controller's
+            if hasattr(ctrl, gain):
+                out[gain] = float(getattr(ctrl, gain))
+        return json.loads(json.dumps(out))
 
     # ------------------------------------------------------------------ episode
     def reset(self) -> None:

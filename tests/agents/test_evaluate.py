@@ -321,3 +321,41 @@ def test_a_policy_error_is_recorded_not_hidden_in_a_failure(capsys, monkeypatch)
     assert s["policy_errors"] == 1
     assert main(["evaluate", "--policy", "reference", "--env", FLAT, "--episodes", "1"]) == 0
     assert "went limp in 1 of 1 episodes" in capsys.readouterr().out
+
+
+def test_an_agent_on_a_changed_base_is_warned_naming_the_settings(tmp_path):
+    """A run's manifest records the resolved settings of the base its agent acts on
+    (``base_settings``); evaluated where those differ (defaults changed since), the agent is
+    still evaluated, with a warning naming each changed setting."""
+    import shutil
+    import warnings
+
+    from agents.evaluate import BaseChangedWarning, make_env
+    from agents.policies import base_settings, settings_changes
+    from agents.pretrained import PRETRAINED_DIR
+    from agents.trained import TrainedPolicy
+
+    shutil.copytree(PRETRAINED_DIR / "residual_ppo_rough_d3", tmp_path / "run")
+    model = tmp_path / "run" / "best_model.zip"
+    manifest = json.loads((tmp_path / "run" / "manifest.json").read_text())
+    trained = TrainedPolicy(model)
+    env = trained.wrap_env(make_env(trained.config.env_id, trained.config.env_kwargs))
+    now = base_settings(env)
+    env.close()
+    assert [b["wrapper"] for b in now] == ["ResidualWrapper"] and settings_changes(now, now) == []
+    for recorded, changed in ((now, []), (json.loads(json.dumps(now)), ["deeper_relaxation"])):
+        for name in changed:
+            recorded[0]["controller"][name] = [["torque_fraction", 0.9]]
+        (tmp_path / "run" / "manifest.json").write_text(
+            json.dumps({**manifest, "base_settings": recorded})
+        )
+        with warnings.catch_warnings(record=True) as caught:
+            warnings.simplefilter("always")
+            env, _, _, _ = make_eval_env(str(model), None)
+            env.close()
+        said = [str(w.message) for w in caught if w.category is BaseChangedWarning]
+        if not changed:
+            assert said == []
+        else:
+            assert len(said) == 1
+            assert "[0].controller.deeper_relaxation: [['torque_fraction', 0.9]], now []" in said[0]

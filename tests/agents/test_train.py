@@ -42,6 +42,13 @@ def test_smoke_training_of_every_config(path: Path, smoke, tmp_path: Path):
     assert all(0 <= s < TRAIN_SEED_LIMIT for s in seeds["training_envs"])
     assert all(s >= EVAL_SEED_OFFSET for s in seeds["evaluation"])
     assert manifest["config"]["run"]["env"] == cfg.env_id
+    # the base an agent acts on, resolved: the residual's or the per-footstep wrapper's
+    bases = [b["wrapper"] for b in manifest["base_settings"]]
+    assert bases == (
+        ["ResidualWrapper"] if cfg.is_residual else ["FootstepWrapper"] if cfg.is_footstep else []
+    )
+    for base in manifest["base_settings"]:
+        assert base["controller"]["horizon"] >= 1 and "torque_fraction" in base["planner"]
 
 
 @pytest.mark.parametrize("name", ["ppo_flat", "sac_rough"])

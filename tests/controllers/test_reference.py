@@ -162,3 +162,25 @@ def test_bad_observations_and_modes_raise():
         policy(obs[:3])
     with pytest.raises(ValueError, match="sensor"):
         make_reference_policy(gym.make("roughwalk/CompassGaitFlat-v0", observation="state"))
+
+
+def test_settings_are_the_resolved_ones_in_json_types():
+    """``settings()`` gives every controller and planner field with the robot's defaults filled
+    in, the policy's own options and, for PD, its gains: what a run records of its base."""
+    import json
+
+    from controllers import ControllerConfig, PlannerConfig
+
+    env = gym.make("roughwalk/CompassGaitRough-v0")
+    ref = make_reference_policy(env, config={"tube_replans": 1}, identify=3)
+    s = ref.settings()
+    assert json.loads(json.dumps(s)) == s
+    assert s["policy"] == "ReferencePolicy" and s["identify"] == 3 and s["localise"] is True
+    assert ControllerConfig.from_dict(s["controller"]) == ControllerConfig.for_robot(
+        "paper", tube_replans=1
+    )
+    assert PlannerConfig.from_dict(s["planner"]) == PlannerConfig.for_robot("paper")
+    assert s["observer_eps"] == 0.04 and "kp" not in s
+    pd = PDPolicy(env, kp=300.0).settings()
+    assert pd["policy"] == "PDPolicy" and pd["kp"] == 300.0 and pd["kd"] > 0
+    env.close()
