@@ -336,10 +336,26 @@ PAPER_WEIGHTS: dict[str, Any] = {
 }
 
 
-def _charged(outcome: Plan | PlanningError) -> int:
-    """The step evaluations a planner call charges to a replanning's shared budget (the beam
-    search's have their own)."""
+def _book(outcome: Plan | PlanningError, rec: StepRecord, notes: list[str], name: str) -> int:
+    """Record a planner call of the degradation ``name`` in ``rec``: the step evaluations it
+    spent and, where it raised ``outcome``, whether its budget cut it and the error (in
+    ``notes``). Returns what it charges to the replanning's shared budget (the beam search's
+    evaluations have their own)."""
+    rec.plan_evaluations += outcome.evaluations
+    if isinstance(outcome, PlanningError):
+        rec.budget_exhausted |= outcome.budget_exhausted
+        notes.append(f"{name}: {outcome}")
     return outcome.evaluations - outcome.beam_evaluations
+
+
+def _budget_spent(left: int, rec: StepRecord, notes: list[str], name: str) -> bool:
+    """Whether the replanning's shared budget is spent (``left`` step evaluations) before
+    the degradation ``name``; if so, say so in ``rec`` and ``notes``."""
+    if left > 0:
+        return False
+    notes.append(f"{name}: replanning budget spent")
+    rec.budget_exhausted = True
+    return True
 
 
 class TransverseController:
@@ -621,9 +637,7 @@ class TransverseController:
                     return old
                 notes.append(f"{name}: fewer than two steps left")
                 continue
-            if level != "least violation" and left <= 0:
-                notes.append(f"{name}: replanning budget spent")
-                rec.budget_exhausted = True
+            if level != "least violation" and _budget_spent(left, rec, notes, name):
                 continue
             planner = self._planner_for(level)
             try:
@@ -633,12 +647,8 @@ class TransverseController:
                     )
                 else:
                     plan = self._budgeted_plan(planner, q, qd, n, previous, min(left, cap))
-                    left -= _charged(plan)
             except PlanningError as exc:
-                left -= _charged(exc)
-                rec.plan_evaluations += exc.evaluations
-                rec.budget_exhausted |= exc.budget_exhausted
-                notes.append(f"{name}: {exc}")
+                left -= _book(exc, rec, notes, name)
                 if len(exc.partial) < 2:
                     single = single or list(exc.partial)
                     continue
@@ -653,7 +663,9 @@ class TransverseController:
                 notes.append(f"{name}: {exc}")
                 break
             else:
-                rec.plan_evaluations += plan.evaluations
+                spent = _book(plan, rec, notes, name)
+                if level != "least violation":  # it has the planner's own budget
+                    left -= spent
                 if len(plan.steps) < 2:
                     single = single or list(plan.steps)
                     notes.append(f"{name}: fewer than two steps")
@@ -703,18 +715,13 @@ class TransverseController:
         level = self.config.deeper_relaxation
         relaxed = f"{fallback_name(level)}, deeper"
         rec.degradations.append(relaxed)
-        if left <= 0:
-            notes.append(f"{relaxed}: replanning budget spent")
-            rec.budget_exhausted = True
+        if _budget_spent(left, rec, notes, relaxed):
             return plan, name, left
         planner = self._planner_for(level)
         try:
             deeper = self._budgeted_plan(planner, q, qd, n, previous, min(left, cap))
         except PlanningError as exc:
-            left -= _charged(exc)
-            rec.plan_evaluations += exc.evaluations
-            rec.budget_exhausted |= exc.budget_exhausted
-            notes.append(f"{relaxed}: {exc}")
+            left -= _book(exc, rec, notes, relaxed)
             if len(exc.partial) <= len(plan.steps):
                 return plan, name, left
             return (
@@ -722,8 +729,7 @@ class TransverseController:
                 f"{relaxed}, shorter horizon",
                 left,
             )
-        left -= _charged(deeper)
-        rec.plan_evaluations += deeper.evaluations
+        left -= _book(deeper, rec, notes, relaxed)
         return deeper, relaxed, left
 
     def _budgeted_plan(
