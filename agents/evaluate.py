@@ -383,8 +383,10 @@ def load_trained(
 
 
 class BaseChangedWarning(UserWarning):
-    """A trained agent is evaluated on a base policy whose settings differ from those it was
-    trained on (this release's defaults changed since; its manifest records the old ones)."""
+    """A trained agent is evaluated on a base policy whose settings differ from those its
+    manifest records (``base_settings``: the base it was trained on; for the shipped agents
+    trained before runs recorded it, the base their card's check courses were walked on when
+    it was first recorded): this release's defaults changed since."""
 
 
 def warn_changed_base(policy_spec: str, manifest: dict[str, Any], env: gym.Env) -> list[str]:
@@ -401,8 +403,9 @@ def warn_changed_base(policy_spec: str, manifest: dict[str, Any], env: gym.Env) 
             f"; and {len(changes) - 4} more" if len(changes) > 4 else ""
         )
         warnings.warn(
-            f"{policy_spec}: its base policy's settings differ from those it was trained on "
-            f"({shown}); to evaluate it on its own base, set them in its config's base_kwargs",
+            f"{policy_spec}: its base policy's settings differ from those its manifest records "
+            f"(base_settings: {shown}); to evaluate it on its own base, set them in its "
+            "config's base_kwargs",
             BaseChangedWarning,
             stacklevel=2,
         )

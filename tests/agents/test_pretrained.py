@@ -5,11 +5,12 @@ breaks them is caught here)."""
 import json
 import subprocess
 import sys
+import warnings
 
 import numpy as np
 import pytest
 
-from agents.evaluate import evaluate
+from agents.evaluate import BaseChangedWarning, evaluate
 from agents.pretrained import PREFIX, PRETRAINED_DIR, available, card, pack_run, resolve_model
 from agents.sweep.spec import SpecError, check_spec, load_spec
 from agents.trained import TrainedPolicy, load_policy
@@ -76,18 +77,23 @@ def test_a_sweep_spec_names_a_shipped_agent(name, tmp_path):
 def test_each_shipped_agent_still_walks_its_held_out_courses(name):
     """The card's first held-out courses, evaluated as `roughwalk evaluate` does: every course
     the card says was walked is walked again (the agent and the controllers underneath
-    unchanged)."""
+    unchanged), on the base its manifest records (``base_settings``: no changed setting)."""
     info = card(name)
     policy = load_policy(f"{PREFIX}{name}")
     assert isinstance(policy, TrainedPolicy)
     check = info["check"]
-    ev = evaluate(
-        f"{PREFIX}{name}",
-        check["env_id"],
-        env_kwargs=check.get("env_kwargs"),
-        episodes=len(check["walked"]),
-        seed=check["seed"],
-    )
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        ev = evaluate(
+            f"{PREFIX}{name}",
+            check["env_id"],
+            env_kwargs=check.get("env_kwargs"),
+            episodes=len(check["walked"]),
+            seed=check["seed"],
+        )
+    # its base is the one its manifest records: a changed default must be pinned in its config
+    changed = [str(w.message) for w in caught if w.category is BaseChangedWarning]
+    assert changed == []
     walked = [e.success for e in ev.episodes]
     assert walked == check["walked"], json.dumps(info["held_out"])
     assert np.isfinite(ev.summary["mean_distance"])
