@@ -54,6 +54,7 @@ from agents.runs import atomic_write_stream, find_vecnormalize, load_vecnormaliz
 from agents.trained import TrainedPolicy, load_policy
 from controllers.controller import ControllerConfig, PDController, TransverseController
 from controllers.planner import PlannerConfig
+from controllers.reference import ADDED_SETTINGS
 from envs.config_util import real_setting
 
 #: the baselines that take a controller mode (``--controller-mode``)
@@ -392,11 +393,14 @@ class BaseChangedWarning(UserWarning):
 def warn_changed_base(policy_spec: str, manifest: dict[str, Any], env: gym.Env) -> list[str]:
     """Warn (:class:`BaseChangedWarning`) when the base policies of ``env``'s wrappers differ
     from those the run's ``manifest`` records (``base_settings``, written by ``roughwalk
-    train``; runs without them are not checked), naming the settings that changed; returns
-    them."""
+    train``; runs without them are not checked; an option added since,
+    ``controllers.reference.ADDED_SETTINGS``, counts at the value that behaves as before),
+    naming the settings that changed; returns them."""
     recorded = manifest.get("base_settings")
     if not recorded:
         return []
+    # an option added since the run was recorded had the value that behaves as before
+    recorded = [{**ADDED_SETTINGS, **base} for base in recorded]
     changes = settings_changes(recorded, base_settings(env))
     if changes:
         shown = "; ".join(changes[:4]) + (
@@ -426,6 +430,7 @@ def make_eval_env(
     observer_eps: float | None = None,
     identify: int | None = None,
     leg_margin: float | None = None,
+    foot_estimate: str | None = None,
 ) -> tuple[gym.Env, Policy, str, dict[str, Any]]:
     """The env (with the agent's wrappers) and the policy for ``policy_spec``.
 
@@ -457,6 +462,9 @@ def make_eval_env(
         leg_margin: for the ``pd`` and ``reference`` baselines, foothold margins widened by
             this many standard deviations of the leg-length uncertainty (in [0, 10]; None: the
             policy's default, 0, off; see :class:`controllers.ReferencePolicy`).
+        foot_estimate: for the ``pd`` and ``reference`` baselines, the point of the
+            localisation's belief the stance foot is corrected to: ``"mean"`` (None: the
+            policy's default) or ``"selected"`` (see :class:`controllers.ReferencePolicy`).
 
     Returns:
         ``(env, policy, env_id, env_kwargs)``, with the env id and keyword arguments used.
@@ -469,6 +477,7 @@ def make_eval_env(
         "observer_eps": observer_eps,
         "identify": identify,
         "leg_margin": leg_margin,
+        "foot_estimate": foot_estimate,
     }
     for name, value in settings.items():
         if value is not None and policy_spec not in CONTROLLED_BASELINES:
@@ -496,8 +505,11 @@ def make_eval_env(
         if isinstance(identify, bool) or not isinstance(identify, int) or identify < 0:
             raise ValueError(f"identify = {identify!r}; allowed: an integer >= 0 (footsteps)")
         options["identify"] = identify
-    if leg_margin is not None:  # checked by the policy (the env is closed if it refuses)
+    # checked by the policy (the env is closed if it refuses)
+    if leg_margin is not None:
         options["leg_margin"] = leg_margin
+    if foot_estimate is not None:
+        options["foot_estimate"] = foot_estimate
     trained = None
     if policy_spec not in BASELINES:
         trained = load_trained(policy_spec, vecnormalize=vecnormalize, algo=algo)
@@ -568,6 +580,7 @@ def evaluate(
     observer_eps: float | None = None,
     identify: int | None = None,
     leg_margin: float | None = None,
+    foot_estimate: str | None = None,
 ) -> Evaluation:
     """Evaluate a baseline (``passive``, ``pd``, ``reference``) or a trained model (path).
 
@@ -581,10 +594,10 @@ def evaluate(
         progress: show a progress bar.
         algo: a trained model's algorithm (default: from its run or the file).
         controller_mode, plan_steps, perception, planner, controller, observer_eps, identify,
-        leg_margin: the ``pd`` and ``reference`` baselines' controller mode, fixed-plan length,
-            perception, planner and controller settings, observer time constant, online
-            identification and foothold margins from the leg-length uncertainty (see
-            :func:`make_eval_env`).
+        leg_margin, foot_estimate: the ``pd`` and ``reference`` baselines' controller mode,
+            fixed-plan length, perception, planner and controller settings, observer time
+            constant, online identification, foothold margins from the leg-length uncertainty
+            and the localisation's point estimate (see :func:`make_eval_env`).
     """
     seeds = eval_seeds(seed, episodes)
     env, policy, env_id, env_kwargs = make_eval_env(
@@ -601,6 +614,7 @@ def evaluate(
         observer_eps,
         identify,
         leg_margin,
+        foot_estimate,
     )
     mass, g, _ = _robot(env)
     iterator: Any = seeds

@@ -65,6 +65,7 @@ from commands.cli import (
     output_file,
 )
 from controllers.controller import MODES
+from controllers.localisation import ESTIMATES
 from controllers.reference import MAX_LEG_MARGIN
 
 ALGOS = ("ppo", "sac", "td3", "a2c")
@@ -284,6 +285,13 @@ def configure(parser: argparse.ArgumentParser) -> None:
         "Z standard deviations of the leg-length uncertainty (the localiser's; default 0, off)",
     )
     parser.add_argument(
+        "--foot-estimate",
+        choices=ESTIMATES,
+        help=f"the {' and '.join(CONTROLLED_BASELINES)} policies correct the stance foot to this "
+        "point of the localisation's belief: its mean (default), or the mean given the likelier "
+        "of a right and a wrong model (selected)",
+    )
+    parser.add_argument(
         "--json", type=output_file, metavar="FILE", help="write summary and episodes as JSON"
     )
     parser.add_argument(
@@ -378,6 +386,7 @@ def run(args: argparse.Namespace) -> int:
             observer_eps=args.observer_eps,
             identify=args.identify,
             leg_margin=args.leg_margin,
+            foot_estimate=args.foot_estimate,
         )
     except ValueError as exc:
         message = str(exc)

@@ -37,7 +37,7 @@ from envs.physics.encoders import encoders_to_q, stance_from_contacts
 from envs.physics.params import RobotParams
 from envs.physics.terrain import Terrain
 
-from .localisation import LocalisationResult, ScanLocaliser
+from .localisation import ESTIMATES, LocalisationResult, ScanLocaliser
 from .mapping import ScanMap
 from .observer import (
     HighGainObserver,
@@ -81,6 +81,10 @@ class SensorStateEstimator:
             origin of its frame is the first stance foot (heights relative to it).
         odometry_error: standard deviation of a dead-reckoned step length, relative to the step
             (localisation's process noise), >= 0.
+        foot_estimate: the point of the localisation's belief the stance foot is corrected to
+            (:data:`controllers.localisation.ESTIMATES`; ``localise`` only): ``"mean"``
+            (default) or ``"selected"`` (the mean given the likelier model, right or wrong; see
+            :class:`ScanLocaliser`).
 
     Attributes:
         x: the estimate ``[q1, q2, q1d, q2d]`` [rad, rad/s] (a view, updated in place).
@@ -107,6 +111,7 @@ class SensorStateEstimator:
         localise: bool | None = False,
         mapping: bool = False,
         odometry_error: float = 0.02,
+        foot_estimate: str = "mean",
     ) -> None:
         u = env.unwrapped
         for name in ("robot", "dt", "u_max", "sensor_layout"):
@@ -140,6 +145,14 @@ class SensorStateEstimator:
             raise ValueError(
                 "localise and mapping read the terrain scan: the env needs sensors.scan_count >= 2"
             )
+        if foot_estimate not in ESTIMATES:
+            raise ValueError(f"foot_estimate = {foot_estimate!r}; allowed: {', '.join(ESTIMATES)}")
+        if foot_estimate != "mean" and not self.localise:
+            raise ValueError(
+                f"foot_estimate = {foot_estimate!r}: a point of the localisation's belief, which "
+                "needs localise (a scanner, mapping off)"
+            )
+        self.foot_estimate = foot_estimate
         if self.localise and self.mapping:
             raise ValueError(
                 "localise and mapping cannot be combined yet: a map built from the scans is in "
@@ -154,7 +167,11 @@ class SensorStateEstimator:
         self.map: ScanMap | None = None
         if self.localise:
             self.localiser = ScanLocaliser(
-                self.offsets, max(_scan_sigma(sensors), 5e-4), sensors.scan_range, odometry_error
+                self.offsets,
+                max(_scan_sigma(sensors), 5e-4),
+                sensors.scan_range,
+                odometry_error,
+                estimate=foot_estimate,
             )
         if self.mapping:
             self.map = ScanMap(noise=_scan_sigma(sensors))

@@ -48,7 +48,7 @@ from .identification import SwingIdentifier, robot_from_coefficients
 from .planner import GaitPlanner, PlannerConfig
 from .records import IdentificationRecord
 
-__all__ = ["PDPolicy", "ReferencePolicy", "make_reference_policy"]
+__all__ = ["ADDED_SETTINGS", "PDPolicy", "ReferencePolicy", "make_reference_policy"]
 
 #: footsteps after which the reference policy identifies the swing dynamics by default
 DEFAULT_IDENTIFY = 6
@@ -62,6 +62,10 @@ MODEL_CHANGE = 0.01
 MARGIN_QUANTUM = 0.0025
 #: the largest leg_margin [standard deviations]
 MAX_LEG_MARGIN = 10.0
+#: options of :meth:`ReferencePolicy.settings` added after trained runs began recording their
+#: base (``agents.policies.base_settings``), each with the value that does what the policy did
+#: before it existed: a base recorded without one had it
+ADDED_SETTINGS: dict[str, Any] = {"foot_estimate": "mean"}
 
 
 class ReferencePolicy:
@@ -92,6 +96,10 @@ class ReferencePolicy:
             the true course (:class:`SensorStateEstimator`).
         odometry_error: relative standard deviation of a dead-reckoned step length (the
             localisation's process noise), >= 0.
+        foot_estimate: the point of the localisation's belief the stance foot is corrected to:
+            ``"mean"`` (default) or ``"selected"``, the mean given the likelier of a right and
+            a wrong model (:class:`controllers.localisation.ScanLocaliser`; needs
+            ``localise``).
         identify: identify the swing dynamics online (:mod:`controllers.identification`):
             after each of the first ``identify`` footsteps the coefficients are fitted to the
             stances walked so far, and the estimator, planner and feedback switch to the
@@ -124,12 +132,13 @@ class ReferencePolicy:
         localise: bool | None = None,
         mapping: bool = False,
         odometry_error: float = 0.02,
+        foot_estimate: str = "mean",
         identify: int = DEFAULT_IDENTIFY,
         leg_margin: float = 0.0,
         **controller_kwargs: Any,
     ):
         est = self.estimator = SensorStateEstimator(
-            env, eps, initial_velocity, localise, mapping, odometry_error
+            env, eps, initial_velocity, localise, mapping, odometry_error, foot_estimate
         )
         self.robot, self.u_max = est.robot, est.u_max
         self.nominal_robot = self.robot
@@ -175,6 +184,7 @@ class ReferencePolicy:
             "localise": self.estimator.localise,
             "mapping": self.estimator.mapping,
             "odometry_error": self.odometry_error,
+            "foot_estimate": self.estimator.foot_estimate,
             "identify": self.identify,
             "leg_margin": self.leg_margin,
             "settle_time": self.settle_time,

@@ -235,8 +235,11 @@ def test_planner_controller_and_observer_options_reach_the_reference_policy():
         observer_eps=0.03,
         identify=2,
         leg_margin=2.5,
+        foot_estimate="selected",
     )
     assert policy.identify == 2 and policy.leg_margin == 2.5
+    assert policy.estimator.localiser.estimate == "selected"
+    assert policy.settings()["foot_estimate"] == "selected"
     ctrl = policy.controller
     assert ctrl.planner.config.min_thetadot == 0.45
     # the rest of the planner config is the robot preset's
@@ -270,6 +273,13 @@ def test_planner_controller_and_observer_options_reach_the_reference_policy():
             "reference",
             {"leg_margin": 1.0, "perception": "known-map"},
             r"leg_margin: needs the terrain-scan localisation",
+        ),
+        ("reference", {"foot_estimate": "median"}, r"foot_estimate = 'median'; allowed: mean"),
+        ("passive", {"foot_estimate": "mean"}, r"foot_estimate: applies to the pd and"),
+        (
+            "reference",
+            {"foot_estimate": "selected", "perception": "known-map"},
+            r"foot_estimate = 'selected': a point of the localisation's belief, which needs",
         ),
     ],
 )

@@ -7,7 +7,7 @@ import pytest
 import envs  # noqa: F401  (registers the ids)
 from controllers import make_reference_policy
 from controllers.estimator import SensorStateEstimator
-from controllers.localisation import NOMINAL_DRIFT, ScanLocaliser
+from controllers.localisation import ESTIMATES, NOMINAL_DRIFT, ScanLocaliser
 from controllers.mapping import ScanMap
 from envs.physics.terrain import Terrain
 from envs.sensors import SensorConfig
@@ -25,12 +25,12 @@ def scan(terrain, x, rng, readings):
     return np.round(noisy / 1e-3).mean(axis=0) * 1e-3
 
 
-def walk(terrain, scale, localise, seed=0, steps=40, length=0.14):
+def walk(terrain, scale, localise, seed=0, steps=40, length=0.14, estimate="mean"):
     """Estimated minus true stance-foot x [m] at each touchdown of a walk whose true steps are
     ``scale`` times the dead-reckoned ones (a leg ``scale - 1`` off), with or without the
     scan's corrections: the mean scan of each stance (50 readings), then the new one."""
     rng = np.random.default_rng(seed)
-    loc = ScanLocaliser(OFFSETS, np.hypot(NOISE, 1e-3 / 12**0.5), 0.3)
+    loc = ScanLocaliser(OFFSETS, np.hypot(NOISE, 1e-3 / 12**0.5), 0.3, estimate=estimate)
     true = est = 0.0
     errors = []
     for _ in range(steps):
@@ -45,16 +45,42 @@ def walk(terrain, scale, localise, seed=0, steps=40, length=0.14):
     return np.array(errors)
 
 
-def test_drift_stays_bounded_under_a_leg_length_error():
+@pytest.mark.parametrize("estimate", ESTIMATES)
+def test_drift_stays_bounded_under_a_leg_length_error(estimate):
     dead = walk(BLOCKS, 0.95, localise=False)
-    loc = walk(BLOCKS, 0.95, localise=True)
+    loc = walk(BLOCKS, 0.95, localise=True, estimate=estimate)
     assert abs(dead[-1]) > 0.25  # m: 7 mm a step, 40 steps
     assert np.abs(loc).max() < 0.025 and np.abs(loc[-10:]).max() < 0.012
 
 
-def test_localisation_does_not_worsen_the_nominal_case():
-    errors = walk(BLOCKS, 1.0, localise=True)
+@pytest.mark.parametrize("estimate", ESTIMATES)
+def test_localisation_does_not_worsen_the_nominal_case(estimate):
+    errors = walk(BLOCKS, 1.0, localise=True, estimate=estimate)
     assert np.abs(errors).max() < 0.006  # m
+
+
+def test_the_selected_estimate_keeps_a_right_model_short_of_a_stair_edge():
+    """A nominal robot's first step ends with a scan point 0.6 mm short of a stair edge, which
+    bounds the error on one side only: the belief's mean moves the foot back by millimetres
+    (the wrong model's wide drifts, cut on one side), the mean given the likelier, right model
+    by less, and by a fraction of a millimetre with the odometry's calibrated noise. Where the
+    scans rule the right model out (legs 5 % off, on blocks) the two estimates are the same."""
+    stairs = Terrain.stairs(edges=[0.40, 0.62], rises=[-0.03, -0.03])
+    step = 0.40 - 0.25 - 0.0006  # the scan point 0.25 m ahead lands 0.6 mm short of the edge
+
+    def error(estimate, odometry_error=0.02):
+        loc = ScanLocaliser(
+            OFFSETS, 0.001, 0.3, odometry_error, initial_sigma=0.0, estimate=estimate
+        )
+        s = stairs.height(step + OFFSETS) - stairs.height(step)  # exact readings
+        est = step + loc.predict(step)
+        return est + loc.update(est, s, stairs.height).shift - step
+
+    assert error("mean") < -0.003 and -0.0025 < error("selected") < 0  # m
+    assert error("mean", 0.005) < -0.002 and abs(error("selected", 0.005)) < 0.001
+    for scale in (0.95, 1.05):
+        mean, selected = (walk(BLOCKS, scale, True, estimate=e) for e in ESTIMATES)
+        assert np.abs(mean[10:] - selected[10:]).max() < 1e-6
 
 
 def test_flat_ground_gives_no_correction():
@@ -71,6 +97,8 @@ def test_flat_ground_gives_no_correction():
 def test_localiser_bad_arguments():
     with pytest.raises(ValueError, match="odometry_error"):
         ScanLocaliser(OFFSETS, 0.002, 0.3, odometry_error=-1.0)
+    with pytest.raises(ValueError, match="estimate = 'mode'; allowed: mean, selected"):
+        ScanLocaliser(OFFSETS, 0.002, 0.3, estimate="mode")
     loc = ScanLocaliser(OFFSETS, 0.002, 0.3)
     with pytest.raises(ValueError, match="10 heights"):
         loc.update(0.0, np.zeros(3), Terrain.flat().height)
@@ -129,6 +157,13 @@ def test_estimator_perception_options():
         SensorStateEstimator(gym.make("roughwalk/CompassGaitFlat-v0"), odometry_error=-0.1)
     with pytest.raises(ValueError, match="cannot be combined"):
         SensorStateEstimator(gym.make("roughwalk/CompassGaitFlat-v0"), localise=True, mapping=True)
+    flat = gym.make("roughwalk/CompassGaitFlat-v0")
+    with pytest.raises(ValueError, match="foot_estimate = 'mode'; allowed: mean, selected"):
+        SensorStateEstimator(flat, localise=True, foot_estimate="mode")
+    with pytest.raises(ValueError, match="needs localise"):
+        SensorStateEstimator(flat, localise=False, foot_estimate="selected")
+    est = SensorStateEstimator(flat, localise=True, foot_estimate="selected")
+    assert est.localiser.estimate == "selected"
 
 
 def test_localised_policy_walks_a_block_course_with_a_shorter_leg():
