@@ -353,9 +353,17 @@ def test_an_agent_on_a_changed_base_is_warned_naming_the_settings(tmp_path):
     now = base_settings(env)
     env.close()
     assert [b["wrapper"] for b in now] == ["ResidualWrapper"] and settings_changes(now, now) == []
-    for recorded, changed in ((now, []), (json.loads(json.dumps(now)), ["deeper_relaxation"])):
-        for name in changed:
-            recorded[0]["controller"][name] = [["torque_fraction", 0.9]]
+    # a base recorded before an option existed had its old behaviour (ADDED_SETTINGS)
+    older = [{k: v for k, v in now[0].items() if k != "foot_estimate"}]
+    other = [{**now[0], "foot_estimate": "selected"}]
+    for recorded, changed in (
+        (now, []),
+        (older, []),
+        (other, ["foot_estimate"]),
+        (json.loads(json.dumps(now)), ["deeper_relaxation"]),
+    ):
+        if "deeper_relaxation" in changed:
+            recorded[0]["controller"]["deeper_relaxation"] = [["torque_fraction", 0.9]]
         (tmp_path / "run" / "manifest.json").write_text(
             json.dumps({**manifest, "base_settings": recorded})
         )
@@ -366,6 +374,8 @@ def test_an_agent_on_a_changed_base_is_warned_naming_the_settings(tmp_path):
         said = [str(w.message) for w in caught if w.category is BaseChangedWarning]
         if not changed:
             assert said == []
+        elif changed == ["foot_estimate"]:
+            assert len(said) == 1 and "[0].foot_estimate: 'selected', now 'mean'" in said[0]
         else:
             assert len(said) == 1
             assert "[0].controller.deeper_relaxation: [['torque_fraction', 0.9]], now []" in said[0]
