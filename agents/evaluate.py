@@ -390,6 +390,19 @@ class BaseChangedWarning(UserWarning):
     it was first recorded): this release's defaults changed since."""
 
 
+def _with_added(recorded: dict[str, Any], added: dict[str, Any]) -> dict[str, Any]:
+    """``recorded`` with the settings of ``added`` it lacks, nested mappings merged key by
+    key (a section the record lacks altogether is not added)."""
+    out = dict(recorded)
+    for key, value in added.items():
+        if isinstance(value, dict):
+            if isinstance(out.get(key), dict):
+                out[key] = _with_added(out[key], value)
+        elif key not in out:
+            out[key] = value
+    return out
+
+
 def warn_changed_base(policy_spec: str, manifest: dict[str, Any], env: gym.Env) -> list[str]:
     """Warn (:class:`BaseChangedWarning`) when the base policies of ``env``'s wrappers differ
     from those the run's ``manifest`` records (``base_settings``, written by ``roughwalk
@@ -400,7 +413,7 @@ def warn_changed_base(policy_spec: str, manifest: dict[str, Any], env: gym.Env) 
     if not recorded:
         return []
     # an option added since the run was recorded had the value that behaves as before
-    recorded = [{**ADDED_SETTINGS, **base} for base in recorded]
+    recorded = [_with_added(base, ADDED_SETTINGS) for base in recorded]
     changes = settings_changes(recorded, base_settings(env))
     if changes:
         shown = "; ".join(changes[:4]) + (

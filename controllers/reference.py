@@ -64,8 +64,9 @@ MARGIN_QUANTUM = 0.0025
 MAX_LEG_MARGIN = 10.0
 #: options of :meth:`ReferencePolicy.settings` added after trained runs began recording their
 #: base (``agents.policies.base_settings``), each with the value that does what the policy did
-#: before it existed: a base recorded without one had it
-ADDED_SETTINGS: dict[str, Any] = {"foot_estimate": "mean"}
+#: before it existed (nested as in the settings: a planner field under ``"planner"``): a base
+#: recorded without one had it
+ADDED_SETTINGS: dict[str, Any] = {"foot_estimate": "mean", "planner": {"speed_reserve": 0.0}}
 
 
 class ReferencePolicy:

@@ -29,7 +29,7 @@ import numpy as np
 from ..bezier import BezierConstraint, chord_coefficients
 from .footholds import touchdown_configuration
 from .plan import StepPlan
-from .problem import MIN_PHASE_SPAN, BudgetExhausted, FixedStep, SearchBudget, shape_guess
+from .problem import MIN_PHASE_SPAN, BudgetExhausted, SearchBudget, shape_guess
 
 if TYPE_CHECKING:
     from .search import StepSearch
@@ -133,7 +133,7 @@ def _expand(search, br: _Branch, j: int, near, far, rel, budget: SearchBudget, l
         q1m, q2m = touchdown_configuration(fh[0] - br.stance[0], fh[1] - br.stance[1], l)
         if not q2m > th_p + MIN_PHASE_SPAN:
             continue
-        fx = FixedStep(th_p, a0, slope, thd, br.stance, fh, q2m, q1m, search._end_speed(fh, q1m))
+        fx = search.fixed_step(j, br.start, br.stance, fh, q1m, q2m)
         chord = q1m - a0
         gait_shape = shape_guess(rel, a0, q1m, cfg.order)
         base = chord_coefficients(a0, q1m, np.arange(2, cfg.order), cfg.order)

@@ -85,6 +85,12 @@ class PlannerConfig:
             constraint: a step that cannot reach it is still feasible.
         gait_min_thetadot: least ``theta_dot`` of the nominal periodic gait [rad/s] (a reserve of
             kinetic energy for rises; the larger of the two applies to the gait).
+        speed_reserve: the first step of a plan (the one under way, from the actual state)
+            keeps ``theta_dot`` at or above ``min(speed_reserve, theta_dot at its start)``
+            [rad/s]: a plan from a slowed robot may not slow it further below this (0: off,
+            only ``min_thetadot``). Meant for the replans within a step, in a relaxation of
+            :attr:`controllers.ControllerConfig.tube_fallbacks`: a replan that would slow the
+            robot further then fails, and the current plan is kept.
         torque_fraction: nominal ``|u|`` stays below this fraction of ``u_max``.
         clearance: least height of the armed swing foot above the ground away from touchdown
             [m]; it ramps down to 0 over the last ``clearance_ramp`` fraction of the step.
@@ -174,6 +180,7 @@ class PlannerConfig:
     min_thetadot: float = 0.2
     end_thetadot_floor: float = 0.0
     gait_min_thetadot: float = 0.0
+    speed_reserve: float = 0.0
     torque_fraction: float = 0.8
     clearance: float = 0.004
     clearance_ramp: float = 0.3
@@ -248,8 +255,8 @@ class PlannerConfig:
         nonneg = (
             "edge_margin drop_margin rise_margin relaxed_margin max_rise max_drop clearance "
             "lookahead_rise arm_clearance retracted_clearance face_clearance touchdown_slope "
-            "gait_min_thetadot end_thetadot_floor w_speed w_end w_shape w_torque w_slope "
-            "time_budget"
+            "gait_min_thetadot speed_reserve end_thetadot_floor w_speed w_end w_shape w_torque "
+            "w_slope time_budget"
         ).split()
         for name in nonneg:
             if not getattr(self, name) >= 0:

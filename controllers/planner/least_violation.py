@@ -100,7 +100,7 @@ def _least_violating_step(
         q1m, q2m = touchdown_configuration(fh[0] - stance[0], fh[1] - stance[1], l)
         if not q2m > th_p + MIN_PHASE_SPAN:
             continue
-        fx = FixedStep(th_p, a0, slope, thd, stance, fh, q2m, q1m, search._end_speed(fh, q1m))
+        fx = search.fixed_step(j, start, stance, fh, q1m, q2m)
         ev, score = _minimise_violation(search, fx)
         if not np.all(np.isfinite(ev["f"])) or np.min(ev["f"]) <= 0:
             continue  # theta_dot reaches zero: no motion along this step to track

@@ -207,6 +207,7 @@ class FixedStep:
     theta_minus: float
     a_last: float
     thetadot_minus_ref: float = math.nan  # end-of-step speed aimed at (nan: the gait's)
+    thetadot_floor: float = 0.0  # least theta_dot beyond the planner's min_thetadot
 
 
 class GaitReference(NamedTuple):
@@ -396,9 +397,8 @@ class StepEvaluator:
             layout = self._layouts[n_faces, periodic] = constraint_layout(
                 grids.nodes.size, grids.check.size, n_faces, periodic
             )
-        fmin = (
-            max(cfg.min_thetadot, cfg.gait_min_thetadot) ** 2 if periodic else cfg.min_thetadot**2
-        )
+        floor = cfg.gait_min_thetadot if periodic else fx.thetadot_floor
+        fmin = max(cfg.min_thetadot, floor) ** 2
         thm_ref = slope_ref = delta_ref = 0.0
         if self.ref is None:  # periodic gait: speed target and effort
             v_target = cfg.target_speed

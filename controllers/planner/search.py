@@ -259,7 +259,7 @@ class StepSearch:
             if not q2m > th_p + MIN_PHASE_SPAN:
                 best_fail = max(best_fail, (-1.0, "theta increases over the step", f"{fh}"))
                 continue
-            fx = FixedStep(th_p, a0, slope, thd, stance, fh, q2m, q1m, self._end_speed(fh, q1m))
+            fx = self.fixed_step(j, start, stance, fh, q1m, q2m)
             x0 = shape_guess(sm.ref.shape, a0, q1m, cfg.order)
             hint = memo.hints.get(_hint_key(stance, fh))
             solved = True  # the warm start is an optimised solution
@@ -336,6 +336,24 @@ class StepSearch:
             need,
         )
 
+    def fixed_step(
+        self,
+        j: int,
+        start: tuple,
+        stance: tuple[float, float],
+        foothold: tuple[float, float],
+        q1m: float,
+        q2m: float,
+    ) -> FixedStep:
+        """Step ``j`` of the plan from ``start`` (``(theta_plus, a0, slope, theta_dot_plus)``)
+        on ``stance`` to ``foothold`` [m], touching down at ``(q1m, q2m)`` [rad]: its end speed
+        aimed at (:meth:`_end_speed`) and, for the first step, the floor of
+        :attr:`PlannerConfig.speed_reserve`."""
+        th_p, a0, slope, thd = start
+        floor = min(self.config.speed_reserve, thd) if j == 0 and math.isfinite(thd) else 0.0
+        end = self._end_speed(foothold, q1m)
+        return FixedStep(th_p, a0, slope, thd, stance, foothold, q2m, q1m, end, floor)
+
     def _end_speed(self, foothold: tuple[float, float], q1m: float) -> float:
         """End-of-step ``theta_dot`` to aim at: the gait's, corrected by the potential energy the
         next step will gain or lose (slow down before a drop, speed up before a rise)."""
@@ -384,7 +402,7 @@ class StepSearch:
             v = (f.theta_plus, f.a0, f.slope, f.thetadot_plus, *f.stance, *f.foothold)
             return tuple(
                 round(float(x), 10) if math.isfinite(x) else None
-                for x in (*v, f.thetadot_minus_ref)
+                for x in (*v, f.thetadot_minus_ref, f.thetadot_floor)
             )
 
         return (

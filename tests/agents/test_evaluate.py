@@ -355,11 +355,14 @@ def test_an_agent_on_a_changed_base_is_warned_naming_the_settings(tmp_path):
     assert [b["wrapper"] for b in now] == ["ResidualWrapper"] and settings_changes(now, now) == []
     # a base recorded before an option existed had its old behaviour (ADDED_SETTINGS)
     older = [{k: v for k, v in now[0].items() if k != "foot_estimate"}]
+    older[0]["planner"] = {k: v for k, v in now[0]["planner"].items() if k != "speed_reserve"}
     other = [{**now[0], "foot_estimate": "selected"}]
+    reserve = [{**now[0], "planner": {**now[0]["planner"], "speed_reserve": 0.4}}]
     for recorded, changed in (
         (now, []),
         (older, []),
         (other, ["foot_estimate"]),
+        (reserve, ["speed_reserve"]),
         (json.loads(json.dumps(now)), ["deeper_relaxation"]),
     ):
         if "deeper_relaxation" in changed:
@@ -376,6 +379,8 @@ def test_an_agent_on_a_changed_base_is_warned_naming_the_settings(tmp_path):
             assert said == []
         elif changed == ["foot_estimate"]:
             assert len(said) == 1 and "[0].foot_estimate: 'selected', now 'mean'" in said[0]
+        elif changed == ["speed_reserve"]:
+            assert len(said) == 1 and "[0].planner.speed_reserve: 0.4, now 0.0" in said[0]
         else:
             assert len(said) == 1
             assert "[0].controller.deeper_relaxation: [['torque_fraction', 0.9]], now []" in said[0]

@@ -21,6 +21,8 @@ def test_bad_config_raises():
         PlannerConfig(gauss_newton_scaling=2)
     with pytest.raises(ValueError, match=r"gauss_newton_scaling = 0.5; allowed: integer >= 0"):
         PlannerConfig(gauss_newton_scaling=0.5)
+    with pytest.raises(ValueError, match=r"speed_reserve = -0.1; allowed: >= 0"):
+        PlannerConfig(speed_reserve=-0.1)
 
 
 @pytest.mark.parametrize("key", ["retract", "arm_distance"])

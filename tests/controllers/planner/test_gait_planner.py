@@ -50,3 +50,47 @@ def test_bad_state_raises(planners):
         pl.plan("flat", (np.array([-0.4, -0.2]), np.array([0.1, -0.5])), (0.0, 0.0))
     with pytest.raises(ValueError, match="state"):
         pl.plan("flat", (np.array([np.nan, 0.0]), np.array([0.1, 0.5])), (0.0, 0.0))
+
+
+# a slowed robot mid-step before the paper's first stair (a replan within a step): past
+# vertical at 0.385 rad/s, the foot 2 cm before the edge; relaxed as the replans within a step
+# are (TUBE_FALLBACKS)
+SLOWED = (np.array([-0.344, 0.048]), np.array([0.468, 0.385]))
+TUBE_RELAXED = {"duration_min": 0.05, "torque_fraction": 1.0}
+
+
+def test_the_speed_reserve_keeps_a_replan_from_slowing_the_robot_further():
+    """Without the reserve the plan from the slowed state lets theta_dot fall below the 0.385
+    rad/s it starts with (to about 0.35) before the long step down; with a reserve above the
+    start speed no such plan is admissible and the planner says which constraint fails; a
+    reserve below what the plan keeps anyway changes nothing."""
+    q, qd = SLOWED
+    plain = GaitPlanner("paper", TUBE_RELAXED).plan(PAPER_STAIRS, SLOWED, (0.379, 0.0), horizon=3)
+    least = float(np.sqrt(plain.steps[0].thetadot_sq_grid.min()))
+    assert 0.3 < least < qd[1] - 0.02
+    with pytest.raises(PlanningError) as err:
+        GaitPlanner("paper", {**TUBE_RELAXED, "speed_reserve": 0.4}).plan(
+            PAPER_STAIRS, SLOWED, (0.379, 0.0), horizon=3
+        )
+    assert err.value.step == 0
+    assert err.value.constraint == "theta_dot^2 bounded away from zero"
+    low = GaitPlanner("paper", {**TUBE_RELAXED, "speed_reserve": 0.3})
+    same = low.plan(PAPER_STAIRS, SLOWED, (0.379, 0.0), horizon=3)
+    np.testing.assert_array_equal(same.steps[0].coeffs, plain.steps[0].coeffs)
+
+
+def test_the_speed_reserve_bounds_the_first_step_only(planners):
+    """From the periodic gait's post-impact state (about 0.9 rad/s) a reserve of 0.6 rad/s
+    holds over the first step, which without it passes mid-stance at the gait's 0.55 rad/s;
+    the steps after it plan the stairs' drops as without it, down to well below 0.6 rad/s."""
+    g = planners["paper"].periodic_gait()
+
+    def least(config: dict) -> list[float]:
+        plan = GaitPlanner("paper", config).plan(PAPER_STAIRS, (g.q, g.qd), (0.0, 0.0), horizon=5)
+        return [float(np.sqrt(s.thetadot_sq_grid.min())) for s in plan.steps]
+
+    plain, reserved = least({}), least({"speed_reserve": 0.6})
+    assert g.qd[1] > 0.6
+    assert plain[0] < 0.58
+    assert reserved[0] >= 0.6 - 1e-6
+    assert min(reserved[1:]) < 0.5
