@@ -280,10 +280,10 @@ class ScanLocaliser:
         marginal, or for ``"selected"`` the marginal given a right model while that has at
         least half the belief."""
         if self.estimate == "selected":
-            right = np.abs(self.rates) <= 3 * NOMINAL_DRIFT
-            p = float(self.belief[right].sum())
+            right = self.belief[np.abs(self.rates) <= 3 * NOMINAL_DRIFT]
+            p = float(right.sum())
             if p >= 0.5:
-                return self.belief[right].sum(axis=0) / p
+                return right.sum(axis=0) / p
         return self.belief.sum(axis=0)
 
     def _match(
