@@ -66,7 +66,10 @@ MAX_LEG_MARGIN = 10.0
 #: base (``agents.policies.base_settings``), each with the value that does what the policy did
 #: before it existed (nested as in the settings: a planner field under ``"planner"``): a base
 #: recorded without one had it
-ADDED_SETTINGS: dict[str, Any] = {"foot_estimate": "mean", "planner": {"speed_reserve": 0.0}}
+ADDED_SETTINGS: dict[str, Any] = {
+    "foot_estimate": "mean",
+    "planner": {"speed_reserve": 0.0, "dip_floor": 0.0},
+}
 
 
 class ReferencePolicy:

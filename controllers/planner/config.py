@@ -91,6 +91,11 @@ class PlannerConfig:
             only ``min_thetadot``). Meant for the replans within a step, in a relaxation of
             :attr:`controllers.ControllerConfig.tube_fallbacks`: a replan that would slow the
             robot further then fails, and the current plan is kept.
+        dip_floor: over every step ``theta_dot`` stays at or above this fraction of the
+            step's own start ``theta_dot``, in [0, 1) (0: off). A reserve relative to the
+            step's speed: it bounds how deep a step may dip towards a stall at mid-stance (a
+            long step over a high apex), while a slowed robot (a push) may still plan slow
+            steps.
         torque_fraction: nominal ``|u|`` stays below this fraction of ``u_max``.
         clearance: least height of the armed swing foot above the ground away from touchdown
             [m]; it ramps down to 0 over the last ``clearance_ramp`` fraction of the step.
@@ -181,6 +186,7 @@ class PlannerConfig:
     end_thetadot_floor: float = 0.0
     gait_min_thetadot: float = 0.0
     speed_reserve: float = 0.0
+    dip_floor: float = 0.0
     torque_fraction: float = 0.8
     clearance: float = 0.004
     clearance_ramp: float = 0.3
@@ -271,6 +277,8 @@ class PlannerConfig:
             raise ValueError(
                 f"PlannerConfig.foothold_shift = {self.foothold_shift}; allowed: [-0.1, 0.1] m"
             )
+        if not 0 <= self.dip_floor < 1:
+            raise ValueError(f"PlannerConfig.dip_floor = {self.dip_floor!r}; allowed: [0, 1)")
         if not self.relaxed_margin <= 1:
             raise ValueError(
                 f"PlannerConfig.relaxed_margin = {self.relaxed_margin}; allowed: [0, 1]"

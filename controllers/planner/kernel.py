@@ -58,6 +58,7 @@ class StepSettings(NamedTuple):
     """Constants of the step problem: robot, bounds and cost weights (SI units)."""
 
     min_thetadot: float  # least theta_dot over the step [rad/s]
+    dip_floor: float  # least theta_dot over a step as a fraction of its start theta_dot
     alpha_scale: float  # scale of the reduced inertia alpha (M22 at q1 = 0)
     u_lim: float  # bound on the nominal |u| [input units]
     u_max: float  # actuator limit [input units]
@@ -250,6 +251,7 @@ def evaluate_steps(
             thp = thd_plus_in[b]
         for k in range(nn):
             F[b, k] = psi[k] * thp * thp + hint[k]
+        fmin = step.fmin if periodic else max(step.fmin, (cfg.dip_floor * thp) ** 2)
         rd.grid_step_time(F[b], qint, half, lo, thd, tcum)
         T = tcum[nn - 1]
         # nominal input and stance-foot reaction along the motion
@@ -262,7 +264,7 @@ def evaluate_steps(
             fn, ft = model.stance_reaction(
                 P, ph[k], th[k], dph[k] * thd[k], thd[k], q1dd, q2dd, nx, ny
             )
-            G[b, col.thetadot_sq + k] = (F[b, k] - step.fmin) / (thd_ref * thd_ref)
+            G[b, col.thetadot_sq + k] = (F[b, k] - fmin) / (thd_ref * thd_ref)
             G[b, col.alpha + k] = al[k] / cfg.alpha_scale - 0.05
             G[b, col.torque + k] = (cfg.u_lim - abs(u)) / cfg.u_max
             G[b, col.stance_reaction + k] = fn / weight
@@ -271,7 +273,7 @@ def evaluate_steps(
             )
         rd.matvec(interp, F[b], fk)  # theta_dot^2 on the check grid
         for k in range(nk):
-            G[b, col.thetadot_sq + nn + k] = (fk[k] - step.fmin) / (thd_ref * thd_ref)
+            G[b, col.thetadot_sq + nn + k] = (fk[k] - fmin) / (thd_ref * thd_ref)
         # swing foot on the check grid, full length and retracted
         i_arm = -1
         bezier_on_basis(a[b], Bg, phg)

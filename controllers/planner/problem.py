@@ -273,6 +273,7 @@ class StepEvaluator:
         self._problems: dict[tuple, tuple] = {}  # see _problem_data
         settings = StepSettings(
             min_thetadot=config.min_thetadot,
+            dip_floor=config.dip_floor,
             alpha_scale=alpha_scale,
             u_lim=u_lim,
             u_max=params.u_max,

@@ -23,6 +23,11 @@ def test_bad_config_raises():
         PlannerConfig(gauss_newton_scaling=0.5)
     with pytest.raises(ValueError, match=r"speed_reserve = -0.1; allowed: >= 0"):
         PlannerConfig(speed_reserve=-0.1)
+    for bad in (-0.1, 1.0):
+        with pytest.raises(ValueError, match=rf"dip_floor = {bad}; allowed: \[0, 1\)"):
+            PlannerConfig(dip_floor=bad)
+    with pytest.raises(ValueError, match=r"dip_floor must be finite"):
+        PlannerConfig(dip_floor=float("nan"))
 
 
 @pytest.mark.parametrize("key", ["retract", "arm_distance"])

@@ -94,3 +94,33 @@ def test_the_speed_reserve_bounds_the_first_step_only(planners):
     assert plain[0] < 0.58
     assert reserved[0] >= 0.6 - 1e-6
     assert min(reserved[1:]) < 0.5
+
+
+def test_the_dip_floor_bounds_every_step_by_its_own_start_speed(planners):
+    """From the periodic gait's state the paper's second step down passes its apex at about
+    42 % of the theta_dot it starts with. A dip floor of 0.5 holds every step of the plan at or
+    above half its own start speed (that step's bound active, a look-ahead step's start being
+    the plan's own); the steps that kept it anyway are planned as before; a floor no first
+    step can keep within the actuator is a PlanningError naming the constraint; 0 changes
+    nothing, bit for bit."""
+    g = planners["paper"].periodic_gait()
+
+    def plan(config: dict):
+        return GaitPlanner("paper", config).plan(PAPER_STAIRS, (g.q, g.qd), (0.0, 0.0), horizon=5)
+
+    def ratios(p) -> np.ndarray:
+        return np.array([np.sqrt(s.thetadot_sq_grid.min()) / s.thetadot_plus for s in p.steps])
+
+    plain, floored = plan({}), plan({"dip_floor": 0.5})
+    r0, r1 = ratios(plain), ratios(floored)
+    assert r0.min() < 0.45
+    assert r1.min() >= 0.5 - 1e-6
+    assert abs(r1[np.argmin(r0)] - 0.5) < 1e-3  # the bound is what shapes that step
+    keep = r0 >= 0.5
+    assert keep.sum() >= 3
+    for a, b in zip(np.array(plain.steps)[keep], np.array(floored.steps)[keep]):
+        np.testing.assert_allclose(b.coeffs, a.coeffs, atol=1e-6)
+    np.testing.assert_array_equal(plan({"dip_floor": 0.0}).steps[-1].coeffs, plain.steps[-1].coeffs)
+    with pytest.raises(PlanningError) as err:
+        plan({"dip_floor": 0.7})
+    assert err.value.step == 0
