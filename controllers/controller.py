@@ -66,6 +66,11 @@ input"``) remains only when there is nothing at all to track (e.g. a non-finite 
 ``theta_dot`` already not positive).
 The step's :class:`StepRecord` says which, and why (``reason``: every degradation tried, with
 its planning error).
+
+The planner's dip floor (``PlannerConfig.dip_floor``) is a preference of the full problem:
+where no plan keeps it, the full problem is planned again without it (a degradation recorded
+as ``"full problem without the dip floor"``, with its own whole budget) and its plan is
+tracked as a full plan (no fallback); every degradation plans without the floor.
 """
 
 from __future__ import annotations
@@ -328,6 +333,12 @@ class ControllerConfig:
         """The fields as a plain dict (the inverse of :meth:`from_dict`)."""
         return asdict(self)
 
+
+#: the full problem without the planner's dip floor (``PlannerConfig.dip_floor``, a preference
+#: of the full problem): planned where no plan keeps the floor, tracked as the full problem's
+#: plans are; every degradation plans without the floor too
+WITHOUT_DIP_FLOOR: tuple = (("dip_floor", 0.0),)
+FULL_WITHOUT_DIP_FLOOR = "full problem without the dip floor"
 
 #: the paper's feedback weights (``Q``, ``R``, ``Qj``: the class defaults), whatever a robot's
 #: preset sets: the basin's convergence metric and the bench's baseline solve
@@ -626,8 +637,15 @@ class TransverseController:
         notes: list[str] = []
         left = self.config.replan_evaluations
         cap = self.planner.config.max_evaluations
+        floored = self.planner.config.dip_floor > 0
+        if floored and levels and levels[0] is None:
+            levels = (None, WITHOUT_DIP_FLOOR, *levels[1:])
         for level in levels:
-            name = "full problem" if level is None else fallback_name(level)
+            full = level is None or level == WITHOUT_DIP_FLOOR
+            if level == WITHOUT_DIP_FLOOR:
+                name = FULL_WITHOUT_DIP_FLOOR
+            else:
+                name = "full problem" if level is None else fallback_name(level)
             rec.degradations.append(name)
             if level == "previous plan":
                 old, off = self._previous_steps(first, new_step)
@@ -648,14 +666,18 @@ class TransverseController:
                 else:
                     plan = self._budgeted_plan(planner, q, qd, n, previous, min(left, cap))
             except PlanningError as exc:
-                left -= _book(exc, rec, notes, name)
+                spent = _book(exc, rec, notes, name)
+                if level is None and floored:
+                    # a preference: the full problem without it next, with the whole budget
+                    continue
+                left -= spent
                 if len(exc.partial) < 2:
                     single = single or list(exc.partial)
                     continue
                 # the steps before the failure are feasible: a shorter look-ahead
                 plan = Plan(exc.partial, self.robot, planner.config)
                 name = "shorter horizon" if level is None else f"{name}, shorter horizon"
-                if level is None and self.config.deeper_relaxation:
+                if full and self.config.deeper_relaxation:
                     plan, name, left = self._deeper(
                         q, qd, n, previous, rec, notes, left, cap, plan, name
                     )
@@ -675,7 +697,7 @@ class TransverseController:
                     if worst[0] < 0:
                         notes.append(f"{name}: worst violation {worst[0]:.3g} ({worst[1]})")
             self.plan, self._plan_offset = plan, 0
-            rec.fallback = None if level is None and name == "full problem" else name
+            rec.fallback = None if name in ("full problem", FULL_WITHOUT_DIP_FLOOR) else name
             if plan.steps[0].note:
                 notes.append(f"{name}: {plan.steps[0].note}")
             if plan.beam:
@@ -774,8 +796,10 @@ class TransverseController:
             return self.planner
         key = (id(self.planner), level)
         out = self._relaxed.get(key)
-        if out is None:
-            out = self._relaxed[key] = self.planner.relaxed(**dict(level))
+        if out is None:  # every degradation plans without the dip floor
+            out = self._relaxed[key] = self.planner.relaxed(
+                **{**dict(WITHOUT_DIP_FLOOR), **dict(level)}
+            )
         return out
 
     def _gains(self, models: list[StepModel]) -> HorizonSolution:

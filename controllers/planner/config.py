@@ -95,7 +95,8 @@ class PlannerConfig:
             step's own start ``theta_dot``, in [0, 1) (0: off). A reserve relative to the
             step's speed: it bounds how deep a step may dip towards a stall at mid-stance (a
             long step over a high apex), while a slowed robot (a push) may still plan slow
-            steps.
+            steps. The reference controller takes it as a preference: where no plan keeps
+            it, it plans without it (:mod:`controllers.controller`).
         torque_fraction: nominal ``|u|`` stays below this fraction of ``u_max``.
         clearance: least height of the armed swing foot above the ground away from touchdown
             [m]; it ramps down to 0 over the last ``clearance_ramp`` fraction of the step.

@@ -207,3 +207,26 @@ def test_the_beam_search_does_not_spend_the_relaxations_budget(gait):
         assert r.reason.startswith("full problem: planning failed")
         assert "relaxed: torque_fraction=0.8: planning failed" not in r.reason, r.reason
     assert out["failure"] is None and len(out["impacts"]) >= 5
+
+
+def test_the_dip_floor_is_a_preference_of_the_full_problem(gait):
+    """No step of the gait keeps 95 % of its start speed over its apex: with that dip floor
+    every footstep plans the full problem without it, tracked as the full problem is (the
+    transverse feedback, no fallback), and the walk is the one without the floor to the last
+    digit; a floor of 0.5, which the gait's steps keep, plans the full problem with it."""
+    plain, _ = walk("flat", gait, ControllerConfig(**ROOMY), ROOMY_PLANNER)
+    runs = {}
+    for floor in (0.95, 0.5):
+        out, _ = walk(
+            "flat", gait, ControllerConfig(**ROOMY), {**ROOMY_PLANNER, "dip_floor": floor}
+        )
+        assert out["failure"] is None and len(out["impacts"]) >= 5
+        runs[floor] = out
+    for r in runs[0.95]["records"][1:]:
+        assert r.fallback is None and not r.pd_feedback
+        assert r.degradations == ["full problem", "full problem without the dip floor"]
+        assert r.reason.startswith("full problem: planning failed at step 0")
+    for key in ("q", "qd", "u", "impacts"):
+        np.testing.assert_array_equal(runs[0.95][key], plain[key])
+    for r in runs[0.5]["records"]:
+        assert r.fallback is None and r.degradations == ["full problem"]
