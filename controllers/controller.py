@@ -642,10 +642,10 @@ class TransverseController:
             levels = (None, WITHOUT_DIP_FLOOR, *levels[1:])
         for level in levels:
             full = level is None or level == WITHOUT_DIP_FLOOR
-            if level == WITHOUT_DIP_FLOOR:
-                name = FULL_WITHOUT_DIP_FLOOR
+            if level is None:
+                name = "full problem"
             else:
-                name = "full problem" if level is None else fallback_name(level)
+                name = FULL_WITHOUT_DIP_FLOOR if full else fallback_name(level)
             rec.degradations.append(name)
             if level == "previous plan":
                 old, off = self._previous_steps(first, new_step)

@@ -100,8 +100,8 @@ def test_the_dip_floor_bounds_every_step_by_its_own_start_speed(planners):
     """From the periodic gait's state the paper's second step down passes its apex at about
     42 % of the theta_dot it starts with. A dip floor of 0.5 holds every step of the plan at or
     above half its own start speed (that step's bound active, a look-ahead step's start being
-    the plan's own); the steps that kept it anyway are planned as before; a floor no first
-    step can keep within the actuator is a PlanningError naming the constraint; 0 changes
+    the plan's own); the steps that kept it anyway are planned as before; a floor of 0.7
+    leaves the first step no plan within the actuator, a PlanningError at step 0; 0 changes
     nothing, bit for bit."""
     g = planners["paper"].periodic_gait()
 
