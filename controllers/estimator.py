@@ -226,7 +226,7 @@ class SensorStateEstimator:
             ValueError: the observation has the wrong size or is not finite.
         """
         o = np.asarray(obs, dtype=np.float64)
-        if o.shape != (self.layout.size,) or not np.all(np.isfinite(o)):
+        if o.shape != (self.layout.size,) or not np.isfinite(o).all():
             raise ValueError(f"observation must be {self.layout.size} finite numbers")
         lay = self.layout
         leg = stance_from_contacts(o[lay.contact_a], o[lay.contact_b], self.stance_leg)
@@ -269,7 +269,7 @@ class SensorStateEstimator:
             self.observer.update(q, u)
             self._scan_sum += self.scan
             self._scan_n += 1
-        if not np.all(np.isfinite(self.observer.x)):
+        if not np.isfinite(self.observer.x).all():
             raise FloatingPointError("non-finite observer estimate")
         return event
 

@@ -13,6 +13,7 @@ form narrow windows; one on the border of its window leaves no next step after a
 from __future__ import annotations
 
 import functools
+import itertools
 import math
 from collections.abc import Sequence
 from dataclasses import dataclass
@@ -395,7 +396,7 @@ class FootholdChains:
         cx, _ = self.chain_footholds(tmap, x, relaxed)
         best = 0
         # every _CHAIN_STRIDE-th candidate first: on passable ground one of them continues
-        for c in (*cx[:: max(1, _CHAIN_STRIDE)], *cx):
+        for c in itertools.chain(cx[:: max(1, _CHAIN_STRIDE)], cx):  # (lazily: most stop early)
             best = max(best, 1 + self.reach(tmap, float(c), depth - 1, relaxed))
             if best >= depth:
                 break

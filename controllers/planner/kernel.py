@@ -493,13 +493,39 @@ def pair_values(P, free, n, common, first, second):
     ``free[:, n:]`` the second's, which starts where the first ends (its start slope and
     ``theta_dot``, the impact's, row by row). ``common``, ``first``, ``second``: as
     :func:`evaluate_shapes` takes them (the second's start in its ``fixed`` is ignored). The
-    cost is the sum of the two steps'."""
-    _, o1, g1 = evaluate_shapes(P, free[:, :n], NO_ROWS, NO_ROWS, False, common, first)
-    _, o2, g2 = evaluate_shapes(
-        P, free[:, n:], o1.slope_plus, o1.delta * o1.thetadot_minus, False, common, second
-    )
+    cost is the sum of the two steps'.
+
+    A row whose first step repeats an earlier row's (a forward difference in the second step's
+    coefficients) reuses that row's first step: the same numbers, one evaluation fewer."""
     nb = free.shape[0]
+    src = _first_occurrences(free, n)
+    rows = np.unique(src)
+    _, o1, g1 = evaluate_shapes(P, free[rows, :n], NO_ROWS, NO_ROWS, False, common, first)
+    at = np.searchsorted(rows, src)  # each row's first step among the evaluated ones
+    _, o2, g2 = evaluate_shapes(
+        P,
+        free[:, n:],
+        o1.slope_plus[at],
+        (o1.delta * o1.thetadot_minus)[at],
+        False,
+        common,
+        second,
+    )
     g = np.empty((nb, g1.shape[1] + g2.shape[1]))
-    g[:, : g1.shape[1]] = g1
+    g[:, : g1.shape[1]] = g1[at]
     g[:, g1.shape[1] :] = g2
-    return o1.cost + o2.cost, g
+    return o1.cost[at] + o2.cost, g
+
+
+@_jit
+def _first_occurrences(free, n):
+    """For each row of ``free``, the first row whose first ``n`` entries equal its own."""
+    nb = free.shape[0]
+    src = np.empty(nb, dtype=np.int64)
+    for b in range(nb):
+        src[b] = b
+        for r in range(b):
+            if src[r] == r and np.all(free[r, :n] == free[b, :n]):
+                src[b] = r
+                break
+    return src

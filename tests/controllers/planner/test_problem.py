@@ -76,9 +76,12 @@ def test_the_compiled_values_are_the_full_evaluations_numbers(planners):
     cost, g = sm.step_values(fx, x[:, :n])
     ev = sm.evaluate_batch(fx, x[:, :n])
     assert np.array_equal(cost, ev["cost"]) and np.array_equal(g, ev["g"], equal_nan=True)
-    cost, g = sm.pair_values(fx, fx2, x)
-    cost2, g2, _ = _pair_batch(sm, fx, fx2, x)
-    assert np.array_equal(cost, cost2) and np.array_equal(g, g2, equal_nan=True)
+    # random rows, and a forward-difference batch: rows 0 and n + 1 .. 2 n share the first step
+    # (evaluated once)
+    for X in (x, np.vstack([x[0], x[0] + 1e-8 * np.eye(2 * n), x[1]])):
+        cost, g = sm.pair_values(fx, fx2, X)
+        cost2, g2, _ = _pair_batch(sm, fx, fx2, X)
+        assert np.array_equal(cost, cost2) and np.array_equal(g, g2, equal_nan=True)
     assert g.shape[1] > ev["g"].shape[1]  # both steps' constraints
     with pytest.raises(ValueError, match="free coefficients of shape"):
         sm.step_values(fx, x)  # a pair's coefficients for one step
