@@ -498,10 +498,8 @@ def pair_values(P, free, n, common, first, second):
     A row whose first step repeats an earlier row's (a forward difference in the second step's
     coefficients) reuses that row's first step: the same numbers, one evaluation fewer."""
     nb = free.shape[0]
-    src = _first_occurrences(free, n)
-    rows = np.unique(src)
+    rows, at = _distinct_rows(free, n)  # at: each row's first step among those evaluated
     _, o1, g1 = evaluate_shapes(P, free[rows, :n], NO_ROWS, NO_ROWS, False, common, first)
-    at = np.searchsorted(rows, src)  # each row's first step among the evaluated ones
     _, o2, g2 = evaluate_shapes(
         P,
         free[:, n:],
@@ -518,14 +516,20 @@ def pair_values(P, free, n, common, first, second):
 
 
 @_jit
-def _first_occurrences(free, n):
-    """For each row of ``free``, the first row whose first ``n`` entries equal its own."""
+def _distinct_rows(free, n):
+    """The rows of ``free`` whose first ``n`` entries differ from every earlier row's, and for
+    each row the position among them of the one it equals."""
     nb = free.shape[0]
-    src = np.empty(nb, dtype=np.int64)
+    rows = np.empty(nb, dtype=np.int64)
+    at = np.empty(nb, dtype=np.int64)
+    m = 0
     for b in range(nb):
-        src[b] = b
-        for r in range(b):
-            if src[r] == r and np.all(free[r, :n] == free[b, :n]):
-                src[b] = r
+        at[b] = m
+        for j in range(m):
+            if np.all(free[rows[j], :n] == free[b, :n]):
+                at[b] = j
                 break
-    return src
+        if at[b] == m:
+            rows[m] = b
+            m += 1
+    return rows[:m], at
