@@ -61,9 +61,11 @@ depth-first search fails, and its plan over the whole horizon is tracked as a fu
 record's reason says so). When none gives two steps, a single step (the first feasible step
 found, else what is left of the previous plan) is held with PD on ``y`` (``fallback = "PD on
 the last planned step"``; also when the Riccati solve over the look-ahead fails, and a step
-whose transverse model cannot be built ends the look-ahead); zero input (``fallback = "zero
-input"``) remains only when there is nothing at all to track (e.g. a non-finite state, or
-``theta_dot`` already not positive).
+whose transverse model cannot be built ends the look-ahead). A replan within a step (the
+state left the plan's tube) that finds nothing to track, not even the rest of the plan under
+way, keeps tracking the step under way with its gains (``fallback = "step under way"``).
+Zero input (``fallback = "zero input"``) remains only when there is nothing at all to track
+(e.g. a non-finite state, or ``theta_dot`` already not positive).
 The step's :class:`StepRecord` says which, and why (``reason``: every degradation tried, with
 its planning error).
 
@@ -107,7 +109,7 @@ from .feedback import constraint_at, feedback_law, thetadot_sq_at
 from .gains import GainTable, HorizonSolution, horizon_gains, pd_gains, step_models
 from .numerics import one_blas_thread
 from .planner import GaitPlanner, Plan, PlannerConfig, PlanningError, StepPlan
-from .records import StepRecord
+from .records import PD_ON_ONE_STEP, STEP_UNDER_WAY, ZERO_INPUT, StepRecord
 from .transverse import StepModel
 
 __all__ = [
@@ -564,8 +566,10 @@ class TransverseController:
         if new_step or not self.records:
             rec = StepRecord(index=len(self.records), t_start=float(t))
             self.records.append(rec)
+            under_way = None
         else:
             rec = self.records[-1]
+            under_way = (self.solution, self.plan, self._plan_offset, rec.fallback, rec.pd_feedback)
             rec.fallback = rec.reason = None
             rec.plan_evaluations, rec.budget_exhausted, rec.degradations = 0, False, []
             rec.pd_feedback = False
@@ -608,9 +612,15 @@ class TransverseController:
             if sol is None and models:
                 # one step to track: no look-ahead to solve over, hold it with PD on y
                 sol = pd_gains(models[:1], cfg.grid, *FALLBACK_PD)
-                rec.fallback = "PD on the last planned step"
+                rec.fallback = PD_ON_ONE_STEP
+        if sol is None and under_way is not None and under_way[0] is not None:
+            # a replan within the step found nothing to track: track the step under way on
+            self.solution, self.plan, self._plan_offset, fallback, pd = under_way
+            rec.pd_feedback = pd or fallback == PD_ON_ONE_STEP
+            rec.fallback = STEP_UNDER_WAY
+            return
         if sol is None:
-            rec.fallback = "zero input"
+            rec.fallback = ZERO_INPUT
             self.solution = None
             self.gain_table = None
             return

@@ -9,7 +9,14 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-__all__ = ["IdentificationRecord", "StepRecord"]
+__all__ = ["PD_ON_ONE_STEP", "STEP_UNDER_WAY", "ZERO_INPUT", "IdentificationRecord", "StepRecord"]
+
+#: ``StepRecord.fallback`` of a step held with PD on ``y`` (no two steps to track)
+PD_ON_ONE_STEP = "PD on the last planned step"
+#: ... of a step whose replan within it found nothing to track: the step under way is tracked on
+STEP_UNDER_WAY = "step under way"
+#: ... of a step with nothing to track at all
+ZERO_INPUT = "zero input"
 
 
 @dataclass(frozen=True)
@@ -66,9 +73,11 @@ class StepRecord:
             look-ahead is cut there), a relaxation (``"relaxed: ..."``, possibly followed by
             ``", shorter horizon"``; ``"relaxed: ..., deeper"`` where
             ``ControllerConfig.deeper_relaxation`` planned further than the full problem),
-            ``"previous plan"``, ``"least violation"``, ``"PD on the last planned step"`` or
-            ``"zero input"`` (see the module docstring); reason: the planning errors of the
-            degradations tried (``" | "`` between them).
+            ``"previous plan"``, ``"least violation"``, ``"PD on the last planned step"``,
+            ``"step under way"`` (a replan within the step found nothing to track, and the
+            step being tracked is tracked on) or ``"zero input"`` (see the module docstring of
+            :mod:`controllers.controller`); reason: the planning errors of the degradations
+            tried (``" | "`` between them).
         plan_evaluations: step evaluations the planner calls of the step spent (all
             degradations together; see :attr:`PlannerConfig.max_evaluations`).
         budget_exhausted: a planner call of the step was cut by its search budget.
@@ -79,8 +88,9 @@ class StepRecord:
         max_xperp_norm: largest Euclidean norm of ``x_perp = [I, y, y_dot]`` over the step
             (0 without gains).
         pd_feedback: the step's relaxed or least-violating plan is tracked with PD on ``y``
-            (``ControllerConfig.relaxed_feedback``; ``V`` is then PD's, with ``P = I``, and
-            :meth:`certificate` reports none).
+            (``ControllerConfig.relaxed_feedback``), or the step under way held with PD is
+            tracked on; ``V`` is then PD's, with ``P = I``, and :meth:`certificate` reports
+            none.
     """
 
     index: int
@@ -113,16 +123,13 @@ class StepRecord:
         """The step's certificate values as plain data: ``V_start``, ``V_end``, ``V_ratio``,
         ``max_xperp_norm``, ``max_abs_u``; None for what is unknown or not finite, and for
         the ``V`` values of a step without Riccati gains (held with PD, or zero input)."""
-        riccati = not self.pd_feedback and self.fallback not in (
-            "PD on the last planned step",
-            "zero input",
-        )
+        riccati = not self.pd_feedback and self.fallback not in (PD_ON_ONE_STEP, ZERO_INPUT)
         values = {
             "V_start": self.V_start if riccati else math.nan,
             "V_end": self.V_end if riccati else math.nan,
             "V_ratio": self.V_ratio if riccati else math.nan,
             "max_xperp_norm": (
-                self.max_xperp_norm if self.ticks and self.fallback != "zero input" else math.nan
+                self.max_xperp_norm if self.ticks and self.fallback != ZERO_INPUT else math.nan
             ),
             "max_abs_u": self.max_abs_u if self.ticks else math.nan,
         }

@@ -511,6 +511,32 @@ def test_a_step_is_replanned_within_at_most_tube_replans_times(replans):
     assert all(r.retargets == 0 for r in recs[1:])
 
 
+def test_a_replan_within_a_step_that_finds_nothing_tracks_the_step_under_way(monkeypatch):
+    """A replan within the step that finds nothing to track, not even the rest of the plan
+    under way (forced here; on rough ground it happens where that plan was a single step held
+    with PD): the step under way is tracked on with its gains, as if no replan had been tried,
+    where the controller used to go limp (zero input) until the next touchdown."""
+    z0 = (-0.4, 0.0, 0.0)
+    reference = tube_loop(z0, 4, tube_replans=0)
+    plan_steps = TransverseController._plan_steps
+
+    def nothing_within(self, q, qd, n, first, new_step, *args):
+        if not (first or new_step):
+            self.records[-1].reason = "forced: nothing to track"
+            return None
+        return plan_steps(self, q, qd, n, first, new_step, *args)
+
+    monkeypatch.setattr(TransverseController, "_plan_steps", nothing_within)
+    failure, recs = tube_loop(z0, 4)
+    assert recs[0].retargets == 2 and recs[0].fallback == "step under way"
+    assert not recs[0].pd_feedback and recs[0].certificate()["V_start"] is not None
+    assert all(r.fallback != "zero input" for r in recs)
+    # the same motion as without replans, tick for tick: the same failure, after as many ticks
+    assert failure == reference[0] and failure is not None
+    assert [r.ticks for r in recs] == [r.ticks for r in reference[1]]
+    assert recs[0].max_abs_u == reference[1][0].max_abs_u > 0
+
+
 def test_the_tube_is_left_alone_in_fixed_plan_mode_and_when_switched_off():
     z0 = (-0.2, 0.0, 0.0)
     for config in (
