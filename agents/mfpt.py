@@ -45,6 +45,7 @@ from scipy import stats
 
 import envs  # noqa: F401  (registers the ids)
 from controllers.controller import ControllerConfig
+from controllers.planner import PlannerConfig
 from envs.physics.terrain import MAX_COURSE_LENGTH, terrain_spec
 
 from .policies import BASELINES, make_baseline_policy
@@ -518,19 +519,28 @@ def check_run_args(
         raise ValueError(f"max_step_time = {max_step_time!r} out of range; allowed: (0, 60] s")
 
 
-def policy_options(policy: str, controller: dict[str, Any] | None) -> dict[str, Any]:
+def policy_options(
+    policy: str, controller: dict[str, Any] | None, planner: dict[str, Any] | None = None
+) -> dict[str, Any]:
     """Keyword arguments of :func:`agents.policies.make_baseline_policy` for ``policy`` with the
-    controller settings ``controller`` (:class:`controllers.ControllerConfig` fields; None or
+    controller settings ``controller`` (:class:`controllers.ControllerConfig` fields) and the
+    gait-planner settings ``planner`` (:class:`controllers.PlannerConfig` fields; None or
     empty: none). Raises ``ValueError`` naming a bad field, or settings for ``passive``."""
-    if not controller:
-        return {}
-    if policy == "passive":
-        raise ValueError("controller: applies to the pd and reference policies, not to passive")
-    try:
-        ControllerConfig.from_dict(dict(controller))
-    except (TypeError, ValueError) as exc:
-        raise ValueError(f"controller: {exc}") from None
-    return {"config": dict(controller)}
+    out: dict[str, Any] = {}
+    for name, value, cls, key in (
+        ("controller", controller, ControllerConfig, "config"),
+        ("planner", planner, PlannerConfig, "planner"),
+    ):
+        if not value:
+            continue
+        if policy == "passive":
+            raise ValueError(f"{name}: applies to the pd and reference policies, not to passive")
+        try:
+            cls.from_dict(dict(value))
+        except (TypeError, ValueError) as exc:
+            raise ValueError(f"{name}: {exc}") from None
+        out[key] = dict(value)
+    return out
 
 
 def run_walks(
@@ -545,6 +555,7 @@ def run_walks(
     max_step_time: float = 4.0,
     on_walk: Callable[[Walk], None] | None = None,
     controller: dict[str, Any] | None = None,
+    planner: dict[str, Any] | None = None,
 ) -> list[Walk]:
     """Walk ``policy`` on courses of random blocks of ``roughness`` until each walk fails or
     is censored, ``walkers`` walks at a time on one native vector env.
@@ -568,12 +579,14 @@ def run_walks(
         on_walk: called with each finished walk (progress).
         controller: :class:`controllers.ControllerConfig` fields of the ``pd`` and
             ``reference`` policies (None: their defaults).
+        planner: :class:`controllers.PlannerConfig` fields of their gait planner (None: the
+            robot's defaults).
 
     Returns:
         The walks in walk order.
     """
     check_run_args(policy, walks, walkers, step_cap, seed, max_step_time)
-    policy_kwargs = policy_options(policy, controller)
+    policy_kwargs = policy_options(policy, controller, planner)
     r = _nonneg("roughness", roughness, 1.0)
     probe = gym.make(env_id)
     robot, dt = probe.unwrapped.robot, float(probe.unwrapped.dt)

@@ -61,6 +61,7 @@ from controllers.basin import (
     slice_grid,
 )
 from controllers.controller import ControllerConfig
+from controllers.planner import PlannerConfig
 
 OUTPUTS = (
     "basin.json",
@@ -116,6 +117,14 @@ def configure(parser: argparse.ArgumentParser) -> None:
         metavar="KEY=VALUE",
         help="the controller's settings (ControllerConfig fields, e.g. Q=[1,1,1] for the "
         "paper's weights); they set P, so V and the radii too",
+    )
+    parser.add_argument(
+        "--planner",
+        nargs="+",
+        type=key_value,
+        metavar="KEY=VALUE",
+        help="the gait planner's settings (PlannerConfig fields over the robot's preset, e.g. "
+        "clearance=0.003)",
     )
     parser.add_argument(
         "--seed", type=int_range(0, 2**32 - 1), default=0, help="seed of the directions"
@@ -220,9 +229,10 @@ def run(args: argparse.Namespace) -> int:
     if any(b <= a for a, b in zip(radii, radii[1:])):
         raise ValueError(f"--radii: sizes must increase, got {radii}")
     config = controller_config(args.controller, args.robot)
+    planner = planner_config(args.planner, args.robot)
     out: Path = args.out
     with claim_output_folder(out, OUTPUTS, args.overwrite):
-        return _measure(args, out, radii, config)
+        return _measure(args, out, radii, config, planner)
 
 
 def controller_config(pairs: list[tuple[str, Any]] | None, robot: str) -> ControllerConfig:
@@ -234,13 +244,26 @@ def controller_config(pairs: list[tuple[str, Any]] | None, robot: str) -> Contro
         raise ValueError(f"--controller: {exc}") from None
 
 
+def planner_config(pairs: list[tuple[str, Any]] | None, robot: str) -> PlannerConfig:
+    """The gait planner's settings from ``--planner KEY=VALUE`` pairs over the defaults of the
+    robot preset ``robot``; a bad field or value raises ``ValueError`` naming it."""
+    try:
+        return PlannerConfig.for_robot(robot, **dict(pairs or ()))
+    except (TypeError, ValueError) as exc:
+        raise ValueError(f"--planner: {exc}") from None
+
+
 def _measure(
-    args: argparse.Namespace, out: Path, radii: list[float], config: ControllerConfig
+    args: argparse.Namespace,
+    out: Path,
+    radii: list[float],
+    config: ControllerConfig,
+    planner: PlannerConfig,
 ) -> int:
     """``roughwalk basin``'s measurement and outputs, in the folder ``out`` it holds."""
     announce_compilation(SIMULATOR_KERNELS + CONTROLLER_KERNELS)
     t0 = time.perf_counter()
-    ref = periodic_reference(args.robot, config)
+    ref = periodic_reference(args.robot, config, planner)
     samples = sample_basin(ref, radii, args.per_radius, args.seed, args.steps, args.v_tol)
     t_shells = time.perf_counter() - t0
     rows = converged_fractions(samples)
@@ -308,6 +331,8 @@ def _measure(
         "slice_radius": slice_r,
         "controller": dict(args.controller or ()),
         "controller_config": config.to_dict(),
+        "planner": dict(args.planner or ()),
+        "planner_config": planner.to_dict(),
         "simulation": "exact hybrid simulator, reference controller on the true state",
     }
     data = {

@@ -129,6 +129,14 @@ def configure(parser: argparse.ArgumentParser) -> None:
         "e.g. Q=[1,1,1] for the paper's weights)",
     )
     parser.add_argument(
+        "--planner",
+        nargs="+",
+        type=key_value,
+        metavar="KEY=VALUE",
+        help="the pd and reference policies' gait-planner settings (PlannerConfig fields over "
+        "the robot's preset, e.g. clearance=0.003)",
+    )
+    parser.add_argument(
         "--out", type=output_dir, default=Path("results/mfpt"), help="folder of the results"
     )
     parser.add_argument(
@@ -280,11 +288,12 @@ def run(args: argparse.Namespace) -> int:
         policies[0], args.walks, args.walkers, args.step_cap, args.seed, args.max_step_time
     )
     controller = dict(args.controller or ())
+    planner = dict(args.planner or ())
     for policy in [p for p in policies if p != "passive"] or policies:
-        policy_options(policy, controller)  # a bad setting stops the command here
+        policy_options(policy, controller, planner)  # a bad setting stops the command here
     out: Path = args.out
     with claim_output_folder(out, OUTPUTS, args.overwrite):
-        return _measure(args, out, levels, policies, controller)
+        return _measure(args, out, levels, policies, controller, planner)
 
 
 def _measure(
@@ -293,9 +302,10 @@ def _measure(
     levels: list[float],
     policies: list[str],
     controller: dict[str, Any],
+    planner: dict[str, Any],
 ) -> int:
-    """``roughwalk mfpt``'s walks and outputs, in the folder ``out`` it holds (``controller``:
-    the pd and reference policies' ControllerConfig fields)."""
+    """``roughwalk mfpt``'s walks and outputs, in the folder ``out`` it holds (``controller``,
+    ``planner``: the pd and reference policies' ControllerConfig and PlannerConfig fields)."""
     announce_compilation(
         SIMULATOR_KERNELS + (CONTROLLER_KERNELS if policies != ["passive"] else ())
     )
@@ -314,6 +324,7 @@ def _measure(
             env_id=args.env,
             max_step_time=args.max_step_time,
             controller=controller if policy != "passive" else None,
+            planner=planner if policy != "passive" else None,
         )
     leg = results[0].leg_length
     settings = {
@@ -325,6 +336,7 @@ def _measure(
         "max_step_time": args.max_step_time,
         "confidence": args.confidence,
         "controller": controller,
+        "planner": planner,
         "leg_length": leg,
         "mfpt": "1/p footsteps (the failing one counted); p = failures / footsteps attempted",
     }

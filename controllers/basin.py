@@ -46,7 +46,7 @@ from envs.physics.terrain import Terrain
 
 from .controller import PAPER_WEIGHTS, ControllerConfig, TransverseController
 from .gains import HorizonSolution, horizon_gains, step_models
-from .planner import GaitPlanner, PeriodicGait
+from .planner import GaitPlanner, PeriodicGait, PlannerConfig
 from .transverse import StepModel
 
 __all__ = [
@@ -112,17 +112,21 @@ class PeriodicReference:
 
 
 def periodic_reference(
-    robot: RobotParams | str = "paper", config: ControllerConfig | dict | None = None
+    robot: RobotParams | str = "paper",
+    config: ControllerConfig | dict | None = None,
+    planner: PlannerConfig | dict | None = None,
 ) -> PeriodicReference:
-    """The periodic gait of ``robot`` (a preset name or parameters) with the planner's defaults
-    and the Lyapunov matrices of the controller with ``config`` (a :class:`ControllerConfig`, or
-    the fields that differ from the robot's defaults, :meth:`ControllerConfig.for_robot`)."""
+    """The periodic gait of ``robot`` (a preset name or parameters) and the Lyapunov matrices of
+    the controller with ``config`` (a :class:`ControllerConfig`, or the fields that differ from
+    the robot's defaults, :meth:`ControllerConfig.for_robot`); the controller replans with the
+    planner settings ``planner`` (a :class:`PlannerConfig`, or the fields that differ from the
+    robot's defaults; None: the defaults)."""
     params = robot if isinstance(robot, RobotParams) else RobotParams.from_preset(robot)
     if isinstance(config, ControllerConfig):
         cfg = config
     else:
         cfg = ControllerConfig.for_robot(params.name, **(config or {}))
-    planner = GaitPlanner(params)
+    planner = GaitPlanner(params, planner)
     gait = planner.periodic_gait()
     models = step_models(params.vector(), [gait.step] * (cfg.horizon + 1), None, cfg.margin)
     sol = horizon_gains(models, cfg)

@@ -62,8 +62,9 @@ record's reason says so). When none gives two steps, a single step (the first fe
 found, else what is left of the previous plan) is held with PD on ``y`` (``fallback = "PD on
 the last planned step"``; also when the Riccati solve over the look-ahead fails, and a step
 whose transverse model cannot be built ends the look-ahead). A replan within a step (the
-state left the plan's tube) that finds nothing to track, not even the rest of the plan under
-way, keeps tracking the step under way with its gains (``fallback = "step under way"``).
+state left the plan's tube, or :meth:`TransverseController.replan`) that finds nothing to
+track, not even the rest of the plan under way, keeps tracking the step under way with its
+gains (``fallback = "step under way"``).
 Zero input (``fallback = "zero input"``) remains only when there is nothing at all to track
 (e.g. a non-finite state, or ``theta_dot`` already not positive).
 The step's :class:`StepRecord` says which, and why (``reason``: every degradation tried, with

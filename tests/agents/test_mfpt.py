@@ -156,6 +156,22 @@ def test_controller_settings_reach_the_policies():
     assert walks[0].footsteps == 2 and not walks[0].failed
 
 
+def test_planner_settings_reach_the_policies():
+    """``planner``: PlannerConfig fields of the pd and reference policies' gait planner."""
+    assert policy_options("reference", None, {}) == {}
+    opts = policy_options("pd", {"R": 2}, {"clearance": 0.003})
+    assert opts == {"config": {"R": 2}, "planner": {"clearance": 0.003}}
+    for policy, bad, match in (
+        ("passive", {"clearance": 0.003}, "planner: applies to the pd and reference"),
+        ("reference", {"clearance": -1.0}, "PlannerConfig.clearance"),
+        ("reference", {"reach": 1}, "reach"),
+    ):
+        with pytest.raises(ValueError, match=match):
+            policy_options(policy, None, bad)
+    walks = run_walks("reference", 0.0, 1, walkers=1, step_cap=2, planner={"clearance": 0.003})
+    assert walks[0].footsteps == 2 and not walks[0].failed
+
+
 @pytest.mark.parametrize(
     ("kwargs", "match"),
     [

@@ -89,6 +89,9 @@ def test_a_folder_another_command_holds_is_refused(tmp_path: Path, capsys, comma
         (["--controller", "Q=[1,1]"], "ControllerConfig.Q"),
         (["--controller", "gain=2"], "gain"),
         (["--policy", "passive", "--controller", "Q=[1,1,1]"], "not to passive"),
+        (["--planner", "clearance=-1"], "PlannerConfig.clearance"),
+        (["--planner", "reach=2"], "reach"),
+        (["--policy", "passive", "--planner", "clearance=0.003"], "not to passive"),
     ],
 )
 def test_mfpt_bad_input_is_one_line_exit_2(tmp_path: Path, capsys, args, match):
@@ -110,6 +113,26 @@ def test_basin_metric_follows_the_controller_weights(tmp_path: Path):
     assert data["settings"]["controller_config"] == json.loads(json.dumps(config.to_dict()))
     np.testing.assert_allclose(data["P"], periodic_reference("paper", config).P, rtol=1e-12)
     assert not np.allclose(data["P"], periodic_reference("paper").P)
+
+
+def test_basin_and_mfpt_take_planner_settings(tmp_path: Path):
+    """--planner: the gait planner's settings over the robot's preset (the swing foot's
+    clearance of an earlier release, say), recorded with the results."""
+    argv = ["basin", "--radii", "0.1", "--per-radius", "2", "--steps", "1", "--slices", "0"]
+    out = tmp_path / "b"
+    assert main([*argv, "--planner", "clearance=0.003", "--out", str(out)]) == 0
+    settings = json.loads((out / "basin.json").read_text())["settings"]
+    assert settings["planner"] == {"clearance": 0.003}
+    assert settings["planner_config"]["clearance"] == 0.003
+    assert settings["planner_config"]["face_clearance"] == 0.003  # the rest: the preset's
+    assert periodic_reference("paper").planner.config.clearance == 0.006
+    assert periodic_reference("paper", None, {"clearance": 0.003}).planner.config.clearance == 0.003
+    argv = ["mfpt", "--policy", "reference", "--roughness", "0", "--walks", "1", "--walkers", "1"]
+    out = tmp_path / "m"
+    assert main([*argv, "--step-cap", "2", "--planner", "clearance=0.003", "--out", str(out)]) == 0
+    data = json.loads((out / "mfpt.json").read_text())
+    assert data["settings"]["planner"] == {"clearance": 0.003}
+    assert data["levels"][0]["walks"][0]["footsteps"] == 2
 
 
 def test_basin_writes_results(tmp_path: Path, capsys):
@@ -138,6 +161,7 @@ def test_basin_writes_results(tmp_path: Path, capsys):
         (["--v-tol", "0"], "--v-tol"),
         (["--robot", "giant"], "--robot"),
         (["--controller", "R=0"], "ControllerConfig.R"),
+        (["--planner", "clearance=-1"], "--planner: PlannerConfig.clearance"),
         (["--controller", "gain=2"], "gain"),
         (["--controller", "Q"], "--controller"),
     ],
