@@ -45,6 +45,7 @@ from commands.cli import (
     int_range,
     key_value,
     output_dir,
+    preset_config,
 )
 from commands.mfpt import save_figure
 from controllers.basin import (
@@ -228,29 +229,11 @@ def run(args: argparse.Namespace) -> int:
     radii = list(args.radii)
     if any(b <= a for a, b in zip(radii, radii[1:])):
         raise ValueError(f"--radii: sizes must increase, got {radii}")
-    config = controller_config(args.controller, args.robot)
-    planner = planner_config(args.planner, args.robot)
+    config = preset_config(ControllerConfig, "--controller", args.controller, args.robot)
+    planner = preset_config(PlannerConfig, "--planner", args.planner, args.robot)
     out: Path = args.out
     with claim_output_folder(out, OUTPUTS, args.overwrite):
         return _measure(args, out, radii, config, planner)
-
-
-def controller_config(pairs: list[tuple[str, Any]] | None, robot: str) -> ControllerConfig:
-    """The controller's settings from ``--controller KEY=VALUE`` pairs over the defaults of the
-    robot preset ``robot``; a bad field or value raises ``ValueError`` naming it."""
-    try:
-        return ControllerConfig.for_robot(robot, **dict(pairs or ()))
-    except (TypeError, ValueError) as exc:
-        raise ValueError(f"--controller: {exc}") from None
-
-
-def planner_config(pairs: list[tuple[str, Any]] | None, robot: str) -> PlannerConfig:
-    """The gait planner's settings from ``--planner KEY=VALUE`` pairs over the defaults of the
-    robot preset ``robot``; a bad field or value raises ``ValueError`` naming it."""
-    try:
-        return PlannerConfig.for_robot(robot, **dict(pairs or ()))
-    except (TypeError, ValueError) as exc:
-        raise ValueError(f"--planner: {exc}") from None
 
 
 def _measure(

@@ -30,6 +30,7 @@ from commands.cli import (
     announce_compilation,
     int_range,
     key_value,
+    preset_config,
 )
 from configs import CONFIG_DIR
 from controllers.controller import PAPER_WEIGHTS, TransverseController
@@ -500,11 +501,7 @@ def configure(parser: argparse.ArgumentParser) -> None:
 def run(args: argparse.Namespace) -> int:
     """``roughwalk bench`` with the parsed ``args``: run the sections, print one table; returns
     the exit status."""
-    if args.planner:
-        try:
-            PlannerConfig.for_robot("paper", **dict(args.planner))
-        except (TypeError, ValueError) as exc:
-            raise ValueError(f"--planner: {exc}") from None
+    preset_config(PlannerConfig, "--planner", args.planner, "paper")  # checked before any timing
     announce_compilation(SIMULATOR_KERNELS + CONTROLLER_KERNELS)
     title = "roughwalk bench" + (" (quick)" if args.quick else "")
     if args.planner:

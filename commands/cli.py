@@ -178,6 +178,16 @@ def key_value(text: str) -> tuple[str, Any]:
     return key, value
 
 
+def preset_config(cls: Any, option: str, pairs: list[tuple[str, Any]] | None, robot: str) -> Any:
+    """``cls.for_robot(robot, ...)`` (a controller or planner config class) with the settings of
+    an option's ``KEY=VALUE`` pairs over the robot preset's defaults; a bad field or value
+    raises ``ValueError`` naming the option."""
+    try:
+        return cls.for_robot(robot, **dict(pairs or ()))
+    except (TypeError, ValueError) as exc:
+        raise ValueError(f"{option}: {exc}") from None
+
+
 def env_id(text: str) -> str:
     """An argparse ``type=``: a registered roughwalk env id (``roughwalk/...``)."""
     import gymnasium as gym
