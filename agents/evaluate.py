@@ -444,6 +444,7 @@ def make_eval_env(
     identify: int | None = None,
     leg_margin: float | None = None,
     foot_estimate: str | None = None,
+    long_segment: float | None = None,
 ) -> tuple[gym.Env, Policy, str, dict[str, Any]]:
     """The env (with the agent's wrappers) and the policy for ``policy_spec``.
 
@@ -478,6 +479,10 @@ def make_eval_env(
         foot_estimate: for the ``pd`` and ``reference`` baselines, the point of the
             localisation's belief the stance foot is corrected to: ``"mean"`` (None: the
             policy's default) or ``"selected"`` (see :class:`controllers.ReferencePolicy`).
+        long_segment: for the ``pd`` and ``reference`` baselines, the online identification's
+            long shooting segments [s] (in [0, 1]; 0: short segments only, the fits before
+            this option; None: the policy's default, 0.3; see
+            :class:`controllers.ReferencePolicy`).
 
     Returns:
         ``(env, policy, env_id, env_kwargs)``, with the env id and keyword arguments used.
@@ -491,6 +496,7 @@ def make_eval_env(
         "identify": identify,
         "leg_margin": leg_margin,
         "foot_estimate": foot_estimate,
+        "long_segment": long_segment,
     }
     for name, value in settings.items():
         if value is not None and policy_spec not in CONTROLLED_BASELINES:
@@ -523,6 +529,8 @@ def make_eval_env(
         options["leg_margin"] = leg_margin
     if foot_estimate is not None:
         options["foot_estimate"] = foot_estimate
+    if long_segment is not None:
+        options["long_segment"] = long_segment
     trained = None
     if policy_spec not in BASELINES:
         trained = load_trained(policy_spec, vecnormalize=vecnormalize, algo=algo)
@@ -594,6 +602,7 @@ def evaluate(
     identify: int | None = None,
     leg_margin: float | None = None,
     foot_estimate: str | None = None,
+    long_segment: float | None = None,
 ) -> Evaluation:
     """Evaluate a baseline (``passive``, ``pd``, ``reference``) or a trained model (path).
 
@@ -607,10 +616,11 @@ def evaluate(
         progress: show a progress bar.
         algo: a trained model's algorithm (default: from its run or the file).
         controller_mode, plan_steps, perception, planner, controller, observer_eps, identify,
-        leg_margin, foot_estimate: the ``pd`` and ``reference`` baselines' controller mode,
-            fixed-plan length, perception, planner and controller settings, observer time
-            constant, online identification, foothold margins from the leg-length uncertainty
-            and the localisation's point estimate (see :func:`make_eval_env`).
+        leg_margin, foot_estimate, long_segment: the ``pd`` and ``reference`` baselines'
+            controller mode, fixed-plan length, perception, planner and controller settings,
+            observer time constant, online identification, foothold margins from the
+            leg-length uncertainty, the localisation's point estimate and the identification's
+            long segments (see :func:`make_eval_env`).
     """
     seeds = eval_seeds(seed, episodes)
     env, policy, env_id, env_kwargs = make_eval_env(
@@ -628,6 +638,7 @@ def evaluate(
         identify,
         leg_margin,
         foot_estimate,
+        long_segment,
     )
     mass, g, _ = _robot(env)
     iterator: Any = seeds

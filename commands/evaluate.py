@@ -278,6 +278,14 @@ def configure(parser: argparse.ArgumentParser) -> None:
         "the data reject the nominal one (default 6; 0: the nominal model throughout)",
     )
     parser.add_argument(
+        "--long-segment",
+        type=float_range(0.0, 1.0),
+        metavar="S",
+        help=f"the {' and '.join(CONTROLLED_BASELINES)} policies' identification also fits "
+        "segments of S seconds, used where none shows a push (default 0.3; 0: segments of "
+        "0.15 s only, the fits before this option)",
+    )
+    parser.add_argument(
         "--leg-margin",
         type=float_range(0.0, MAX_LEG_MARGIN),
         metavar="Z",
@@ -387,6 +395,7 @@ def run(args: argparse.Namespace) -> int:
             identify=args.identify,
             leg_margin=args.leg_margin,
             foot_estimate=args.foot_estimate,
+            long_segment=args.long_segment,
         )
     except ValueError as exc:
         message = str(exc)

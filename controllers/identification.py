@@ -15,22 +15,27 @@ p2, p3, p4, p5, Fc, Fv)`` is identified in the nominal input's scale. Every robo
 = l / g``; the fit ties ``p2`` to ``p4`` and the leg length, which the localisation measures
 better than the dynamics (a free ``p2`` absorbs a push instead).
 
-:class:`SwingIdentifier` fits ``theta`` by **output error with multiple shooting**: each stance
-is cut into segments of about 0.15 s; each segment is simulated from its own initial state
-(fitted too) under the inputs that were applied, and the simulated angles are compared with the
-measured ones (a Huber loss; a segment that the fitted model still cannot explain, a push say,
-is then left out and the fit repeated). The solver is an iteratively reweighted
-Levenberg-Marquardt on the Huber cost: a segment's residuals depend on the coefficients and its
-own initial state only, so each iteration eliminates the segments' 4 x 4 blocks (a Schur
-complement) and costs in proportion to the number of segments, where a dense solver's cost grows
-with its cube; the coefficients' covariance is the inverse of the same Schur complement at the
-solution. Equation-error fits (regressing on differentiated
-encoder readings) are biased here: the unactuated row of the dynamics is homogeneous in
-``theta``, and noise in the differentiated angles pulls ``p3`` and ``p4 + p5`` to zero
-together. Output error puts the noise where it is, on the measured angles. A Gaussian prior
-centred on the nominal coefficients (:data:`PRIOR`) keeps the directions the data barely see
-(the absolute level of ``p3`` and ``p5`` when only their ratio is excited) near the nominal
-robot.
+:class:`SwingIdentifier` fits ``theta`` by **output error with multiple shooting**: each stance is
+cut into segments of about 0.15 s; each segment is simulated from its own initial state (fitted
+too) under the inputs that were applied, and the simulated angles are compared with the measured
+ones (a Huber loss; a segment that the fitted model still cannot explain, a push say, is then left
+out and the fit repeated). Short segments see the ratio of ``p3`` and ``p5`` (the stance leg's
+inertia and gravity) but barely their level, which decides how much speed a step loses before its
+apex: a +-10 % robot moves ``p5`` by up to 98 %, and fits on segments of 0.15 s alone missed it by
+40 % (rms, on validation stairs courses). So every stance is also cut into segments of 0.3 s, and
+the fit on those is used where each of them is explained to :data:`EXPLAINED_RMS` standard
+deviations; a push within a long segment leaves it unexplained, and the fit on the short segments
+(which a push costs one segment) is used instead. The solver is an iteratively reweighted
+Levenberg-Marquardt on the Huber cost: a segment's residuals depend on the coefficients and its own
+initial state only, so each iteration eliminates the segments' 4 x 4 blocks (a Schur complement)
+and costs in proportion to the number of segments, where a dense solver's cost grows with its cube;
+the coefficients' covariance is the inverse of the same Schur complement at the solution.
+Equation-error fits (regressing on differentiated encoder readings) are biased here: the unactuated
+row of the dynamics is homogeneous in ``theta``, and noise in the differentiated angles pulls
+``p3`` and ``p4 + p5`` to zero together. Output error puts the noise where it is, on the measured
+angles. A Gaussian prior centred on the nominal coefficients (:data:`PRIOR`) keeps the directions
+the data barely see (the absolute level of ``p3`` and ``p5`` when only their ratio is excited) near
+the nominal robot.
 
 :func:`robot_from_coefficients` turns the identified coefficients into the nearest robot
 (smallest relative change of ``m, mH, mHg, Ic, lc``) with a given leg length: the leg length is
@@ -41,8 +46,9 @@ dynamics.
 
 from __future__ import annotations
 
+import dataclasses
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 from numba import njit
@@ -55,6 +61,7 @@ from .numerics import one_blas_thread
 
 __all__ = [
     "COEFFICIENTS",
+    "LONG_PRIOR",
     "PRIOR",
     "IdentifiedModel",
     "SwingIdentifier",
@@ -70,11 +77,21 @@ _FREE = np.array([0, 2, 3, 4, 5, 6])
 #: prior standard deviation of each coefficient, relative to its nominal value: products of
 #: two or three parameters each +-10 % for p1..p5, a poorly known friction for Fc, Fv
 PRIOR = (0.15, 0.15, 0.15, 0.15, 0.15, 0.5, 0.5)
+#: the prior of the fit on long segments: wider for p3 and p5, whose level long segments see
+#: and which a +-10 % robot moves furthest (p5 is the legs' gravity term less the hip's
+#: counterweight: at the corners of +-10 % on every parameter it moves by up to 98 %, p3 by up
+#: to 55 %). The short segments' fit keeps :data:`PRIOR`: with this one a push at every
+#: mid-stance pulled its p3 and p5 by half on a nominal robot
+LONG_PRIOR = (0.15, 0.15, 0.3, 0.15, 0.6, 0.5, 0.5)
 _MIN_SAMPLES = 12  # a shorter segment is dropped
 #: residuals beyond this many standard deviations count linearly (Huber loss)
 ROBUST_SCALE = 3.0
 #: a segment whose rms residual under the fit exceeds this many standard deviations is left out
 OUTLIER_RMS = 3.0
+#: the fit on long segments is used only where each of them is explained to this rms residual
+#: [standard deviations]: a push within one leaves it unexplained (measured: 1.2-4.1 for pushed
+#: segments of 0.3 s, 0.5-1.1 for the others, on rough ground and on the stairs)
+EXPLAINED_RMS = 1.2
 #: relative standard deviation added to every fitted coefficient's: the swing model's own error
 #: (the observer's, the discretisation's), which no amount of data removes; without it a segment
 #: whose sensitivities are large makes the linearised covariance overconfident (a nominal robot
@@ -304,6 +321,8 @@ class IdentifiedModel:
             from the nominal ones under their posterior covariance plus :data:`SD_FLOOR`
             squared (about chi-square with 6 degrees of freedom when the robot is the nominal
             one).
+        long: fitted on the long segments (``SwingIdentifier.long_segment``), else on the
+            short ones.
     """
 
     theta: np.ndarray
@@ -312,6 +331,7 @@ class IdentifiedModel:
     segments: int
     rms: float
     distance2: float
+    long: bool = False
 
     @property
     def significant(self) -> bool:
@@ -320,17 +340,53 @@ class IdentifiedModel:
         return self.distance2 > CHI2_99
 
 
+@dataclass
+class _Shooting:
+    """The stances cut into shooting segments of ``samples`` samples: each segment's angles
+    and inputs, and its last fitted initial-state correction (None before its first fit)."""
+
+    samples: int
+    segments: list[tuple[np.ndarray, np.ndarray]] = field(default_factory=list)
+    x0: list[np.ndarray | None] = field(default_factory=list)
+
+    def add(self, q: np.ndarray, u: np.ndarray) -> int:
+        """Cut one stance (validated ``q`` (n, 2), ``u`` (n,)) into segments; returns how
+        many were added (a segment shorter than the minimum is dropped, a short tail joins the
+        last one)."""
+        n, w = q.shape[0], self.samples
+        added = 0
+        for a in range(0, n, w):
+            b = min(a + w, n)
+            if n - b < w // 2:
+                b = n
+            if b - a >= _MIN_SAMPLES:
+                self.segments.append((q[a:b].copy(), u[a:b].copy()))
+                self.x0.append(None)
+                added += 1
+            if b == n:
+                break
+        return added
+
+
 class SwingIdentifier:
     """Identifies the swing-phase coefficients from stances of measured angles and inputs.
+
+    Every stance is cut twice: into short segments (``segment``), which a push costs one
+    segment of data, and into long ones (``long_segment``), which see the level of ``p3`` and
+    ``p5`` (the stance leg's inertia and gravity) that short ones barely do. The fit on the
+    long segments is the one returned where each of its segments is explained to
+    :data:`EXPLAINED_RMS` (no push seen); otherwise the fit on the short ones.
 
     Args:
         robot: the nominal robot (the prior's centre, and the input gain kept).
         dt: sample period [s], > 0.
         angle_sigma: standard deviation of a measured angle [rad] (encoder noise and
             quantisation), > 0.
-        segment: length of a shooting segment [s], > 0.
+        segment: length of a short shooting segment [s], > 0.
+        long_segment: length of a long shooting segment [s], >= 0 (0: short segments only).
         prior: prior standard deviations relative to the nominal coefficients (7 numbers > 0;
-            :data:`PRIOR`).
+            :data:`PRIOR`), of the fit on the short segments.
+        long_prior: the same for the fit on the long segments (:data:`LONG_PRIOR`).
         substeps: RK4 substeps per sample interval, >= 1.
 
     Attributes:
@@ -344,15 +400,24 @@ class SwingIdentifier:
         dt: float,
         angle_sigma: float,
         segment: float = 0.15,
+        long_segment: float = 0.3,
         prior: tuple[float, ...] = PRIOR,
+        long_prior: tuple[float, ...] = LONG_PRIOR,
         substeps: int = 2,
     ) -> None:
         for name, v in (("dt", dt), ("angle_sigma", angle_sigma), ("segment", segment)):
             if not (math.isfinite(v) and v > 0):
                 raise ValueError(f"identification {name} = {v!r}; allowed: > 0")
-        p = np.asarray(prior, dtype=np.float64)
-        if p.shape != (len(COEFFICIENTS),) or not np.all(np.isfinite(p) & (p > 0)):
-            raise ValueError(f"identification prior = {prior!r}; allowed: 7 numbers > 0")
+        if not (math.isfinite(long_segment) and long_segment >= 0):
+            raise ValueError(
+                f"identification long_segment = {long_segment!r}; allowed: >= 0 (0: off)"
+            )
+        priors = []
+        for name, v in (("prior", prior), ("long_prior", long_prior)):
+            p = np.asarray(v, dtype=np.float64)
+            if p.shape != (len(COEFFICIENTS),) or not np.all(np.isfinite(p) & (p > 0)):
+                raise ValueError(f"identification {name} = {v!r}; allowed: 7 numbers > 0")
+            priors.append(p)
         if int(substeps) != substeps or substeps < 1:
             raise ValueError(f"identification substeps = {substeps!r}; allowed: integer >= 1")
         self.robot = robot
@@ -361,50 +426,46 @@ class SwingIdentifier:
         self.dt = float(dt)
         self.angle_sigma = float(angle_sigma)
         self.samples = max(_MIN_SAMPLES, round(segment / dt))
-        self.prior = p
+        self.long_samples = max(_MIN_SAMPLES, round(long_segment / dt)) if long_segment else 0
+        self.prior, self.long_prior = priors
         self.substeps = int(substeps)
         self.leg_length = robot.l
         self.reset()
 
     def reset(self) -> None:
         """Forget the data (a new episode)."""
-        self.segments: list[tuple[np.ndarray, np.ndarray]] = []
+        self._short = _Shooting(self.samples)
+        self._long = _Shooting(self.long_samples) if self.long_samples else None
         self._z = np.zeros(len(COEFFICIENTS))
-        self._x0: list[np.ndarray | None] = []  # each segment's last fitted initial correction
+
+    @property
+    def segments(self) -> list[tuple[np.ndarray, np.ndarray]]:
+        """The short segments so far: ``(angles (n, 2), inputs (n,))`` each."""
+        return self._short.segments
 
     def add_stance(self, q: np.ndarray, u: np.ndarray) -> int:
         """Add one stance: measured angles ``q`` (n, 2) [rad] at consecutive samples and the
         inputs ``u`` (n,) [input units], ``u[k]`` held from sample ``k`` to ``k + 1`` (the
-        last one unused). Returns the segments added."""
+        last one unused). Returns the short segments added."""
         q = np.asarray(q, dtype=np.float64)
         u = np.asarray(u, dtype=np.float64).reshape(-1)
         if q.ndim != 2 or q.shape[1] != 2 or u.shape != (q.shape[0],):
             raise ValueError(f"stance: q must be (n, 2) and u (n,), got {q.shape} and {u.shape}")
         if not (np.all(np.isfinite(q)) and np.all(np.isfinite(u))):
             raise ValueError("stance: angles and inputs must be finite")
-        n, w = q.shape[0], self.samples
-        added = 0
-        for a in range(0, n, w):
-            b = min(a + w, n)
-            if n - b < w // 2:  # a short tail joins the last segment
-                b = n
-            if b - a >= _MIN_SAMPLES:
-                self.segments.append((q[a:b].copy(), u[a:b].copy()))
-                self._x0.append(None)
-                added += 1
-            if b == n:
-                break
-        return added
+        if self._long is not None:
+            self._long.add(q, u)
+        return self._short.add(q, u)
 
-    def _initial_states(self, which: list[int]) -> np.ndarray:
+    def _initial_states(self, split: _Shooting, which: list[int]) -> np.ndarray:
         """Starting guesses of the segments' initial corrections: the last fit's, else rates
         from a line through a new segment's first samples."""
         x0 = np.zeros((len(which), 4))
         for i, j in enumerate(which):
-            if self._x0[j] is not None:
-                x0[i] = self._x0[j]
+            if split.x0[j] is not None:
+                x0[i] = split.x0[j]
                 continue
-            q = self.segments[j][0]
+            q = split.segments[j][0]
             k = min(6, q.shape[0])
             x0[i, 2:] = np.polyfit(np.arange(k) * self.dt, q[:k], 1)[0]
         return x0
@@ -413,43 +474,55 @@ class SwingIdentifier:
     def fit(self) -> IdentifiedModel | None:
         """The coefficients that best explain the segments so far (None without data).
 
-        Segments the fitted model still cannot explain (root-mean-square residual above
-        :data:`OUTLIER_RMS` standard deviations: a push, a scuff) are left out and the fit is
-        repeated without them; :attr:`IdentifiedModel.segments` counts those kept."""
-        if not self.segments:
+        On the short segments, those the fitted model still cannot explain (root-mean-square
+        residual above :data:`OUTLIER_RMS` standard deviations: a push, a scuff) are left out
+        and the fit is repeated without them; :attr:`IdentifiedModel.segments` counts those
+        kept. The fit on the long segments (from the nominal coefficients) replaces it where
+        every long segment is explained to :data:`EXPLAINED_RMS`."""
+        if not self._short.segments:
             return None
-        first = self._fit(list(range(len(self.segments))))
+        first = self._fit(self._short, list(range(len(self._short.segments))), self._z, self.prior)
         if first is None:
             return None
         fit, rms = first
         keep = [i for i, r in enumerate(rms) if r <= OUTLIER_RMS]
         if keep and len(keep) < len(rms):
-            again = self._fit(keep)
+            again = self._fit(self._short, keep, self._z, self.prior)
             if again is not None:
                 fit = again[0]
-        self._z = fit.relative.copy()
+        self._z = fit.relative.copy()  # the next short fit starts here, never at a long fit
+        if self._long is not None and self._long.segments:
+            every = list(range(len(self._long.segments)))
+            long = self._fit(self._long, every, np.zeros(len(COEFFICIENTS)), self.long_prior)
+            if long is not None and np.all(long[1] <= EXPLAINED_RMS):
+                fit = dataclasses.replace(long[0], long=True)
         return fit
 
-    def _problem(self, which: list[int]) -> tuple[np.ndarray, np.ndarray, tuple]:
-        """The fit to the segments ``which`` as ``(p0, scale, args)``: the starting point
-        (coefficients, then each segment's initial-state correction), the unknowns' typical
+    def _problem(
+        self, split: _Shooting, which: list[int], z0: np.ndarray, prior: np.ndarray
+    ) -> tuple[np.ndarray, np.ndarray, tuple]:
+        """The fit to the segments ``which`` of ``split`` from the relative coefficients ``z0``
+        under ``prior`` (7 relative standard deviations) as ``(p0, scale, args)``: the starting
+        point (coefficients, then each segment's initial-state correction), the unknowns' typical
         sizes and the arguments of :func:`_residuals` after the point."""
-        segments = [self.segments[i] for i in which]
+        segments = [split.segments[i] for i in which]
         Q = np.ascontiguousarray(np.concatenate([q for q, _ in segments]))
         U = np.ascontiguousarray(np.concatenate([u for _, u in segments]))
         bounds = np.cumsum([0] + [q.shape[0] for q, _ in segments])
-        prior = self.prior[_FREE]
+        prior = prior[_FREE]
         ratio = self.leg_length / self.robot.l
         args = (self.P.copy(), _INDEX, self.nominal, _FREE, ratio, prior, Q, U, bounds)
         args += (self.dt, self.substeps, self.angle_sigma)
-        p0 = np.concatenate([self._z[_FREE], self._initial_states(which).ravel()])
+        p0 = np.concatenate([z0[_FREE], self._initial_states(split, which).ravel()])
         scale = np.concatenate([prior, np.tile(_INIT_SCALE, len(segments))])
         return p0, scale, args
 
-    def _fit(self, which: list[int]) -> tuple[IdentifiedModel, np.ndarray] | None:
-        """The fit to the segments ``which``, and each one's rms residual [standard
-        deviations]."""
-        p0, scale, args = self._problem(which)
+    def _fit(
+        self, split: _Shooting, which: list[int], z0: np.ndarray, prior: np.ndarray
+    ) -> tuple[IdentifiedModel, np.ndarray] | None:
+        """The fit to the segments ``which`` of ``split`` from ``z0`` under ``prior``, and
+        each one's rms residual [standard deviations]."""
+        p0, scale, args = self._problem(split, which, z0, prior)
         nf, S, bounds = _FREE.size, len(which), args[8]
         nominal, prior, sig, ratio = self.nominal, args[5], self.angle_sigma, args[4]
         x, A, B, C = _fit_huber(p0, scale, args)
@@ -466,7 +539,7 @@ class SwingIdentifier:
         if not (np.all(np.isfinite(free)) and math.isfinite(distance2)):
             return None
         for i, j in enumerate(which):
-            self._x0[j] = x[nf + 4 * i : nf + 4 * i + 4].copy()
+            split.x0[j] = x[nf + 4 * i : nf + 4 * i + 4].copy()
         z = _coefficients(free, _FREE, ratio)
         sigma = np.empty(len(COEFFICIENTS))
         sigma[_FREE] = sd

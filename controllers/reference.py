@@ -52,6 +52,9 @@ __all__ = ["ADDED_SETTINGS", "PDPolicy", "ReferencePolicy", "make_reference_poli
 
 #: footsteps after which the reference policy identifies the swing dynamics by default
 DEFAULT_IDENTIFY = 6
+#: length of the identification's long shooting segments by default [s]
+#: (:class:`controllers.identification.SwingIdentifier`)
+DEFAULT_LONG_SEGMENT = 0.3
 #: the leg length is re-identified when the localisation's drift is this many of its standard
 #: deviations from zero
 DRIFT_Z = 1.5
@@ -68,6 +71,7 @@ MAX_LEG_MARGIN = 10.0
 #: recorded without one had it
 ADDED_SETTINGS: dict[str, Any] = {
     "foot_estimate": "mean",
+    "long_segment": 0.0,
     "planner": {"speed_reserve": 0.0, "dip_floor": 0.0},
 }
 
@@ -112,6 +116,11 @@ class ReferencePolicy:
             0: off (the nominal model throughout). Default :data:`DEFAULT_IDENTIFY`. The fits
             are in :attr:`diagnostics` (``"identified"``: one
             :class:`controllers.records.IdentificationRecord` per fit).
+        long_segment: the identification's long shooting segments [s], in [0, 1]: where each
+            of them is explained (no push seen) their fit, which sees the level of the stance
+            leg's inertia and gravity, replaces the fit on short segments; 0: short segments
+            only (the fits of releases before this option). Default
+            :data:`DEFAULT_LONG_SEGMENT`.
         leg_margin: foothold margins from the leg-length uncertainty: at every touchdown the
             planner's ``edge_margin`` is widened by ``leg_margin`` standard deviations of where
             a step of ``step_length`` lands, from the localiser's belief about the drift rate
@@ -138,6 +147,7 @@ class ReferencePolicy:
         odometry_error: float = 0.02,
         foot_estimate: str = "mean",
         identify: int = DEFAULT_IDENTIFY,
+        long_segment: float = DEFAULT_LONG_SEGMENT,
         leg_margin: float = 0.0,
         **controller_kwargs: Any,
     ):
@@ -151,6 +161,12 @@ class ReferencePolicy:
         if identify < 0:
             raise ValueError(f"identify = {identify!r}; allowed: an integer >= 0 (footsteps)")
         self.identify = int(identify)
+        allowed = "allowed: a number in [0, 1] (s; 0: short segments only)"
+        if isinstance(long_segment, bool) or not isinstance(long_segment, (int, float, np.number)):
+            raise ValueError(f"long_segment = {long_segment!r}; {allowed}")
+        if not (math.isfinite(long_segment) and 0 <= long_segment <= 1):
+            raise ValueError(f"long_segment = {long_segment!r}; {allowed}")
+        self.long_segment = float(long_segment)
         allowed = f"allowed: a number in [0, {MAX_LEG_MARGIN}] (standard deviations)"
         if isinstance(leg_margin, bool) or not isinstance(leg_margin, (int, float, np.number)):
             raise ValueError(f"leg_margin = {leg_margin!r}; {allowed}")
@@ -165,7 +181,9 @@ class ReferencePolicy:
         self.odometry_error = float(odometry_error)
         self.identifier: SwingIdentifier | None = None
         if self.identify:
-            self.identifier = SwingIdentifier(self.robot, est.dt, est.angle_sigma)
+            self.identifier = SwingIdentifier(
+                self.robot, est.dt, est.angle_sigma, long_segment=self.long_segment
+            )
         # the episode's course is known at its first tick: the controller gets it at reset
         self.controller = self.controller_class(
             self.robot, est.terrain, config, planner, **controller_kwargs
@@ -190,6 +208,7 @@ class ReferencePolicy:
             "odometry_error": self.odometry_error,
             "foot_estimate": self.estimator.foot_estimate,
             "identify": self.identify,
+            "long_segment": self.long_segment,
             "leg_margin": self.leg_margin,
             "settle_time": self.settle_time,
         }

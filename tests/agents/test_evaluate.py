@@ -276,6 +276,8 @@ def test_planner_controller_and_observer_options_reach_the_reference_policy():
         ),
         ("reference", {"foot_estimate": "median"}, r"foot_estimate = 'median'; allowed: mean"),
         ("passive", {"foot_estimate": "mean"}, r"foot_estimate: applies to the pd and"),
+        ("reference", {"long_segment": -0.1}, r"long_segment = -0.1; allowed: a number in \[0, 1"),
+        ("passive", {"long_segment": 0.0}, r"long_segment: applies to the pd and reference"),
         (
             "reference",
             {"foot_estimate": "selected", "perception": "known-map"},
