@@ -520,13 +520,29 @@ def check_run_args(
 
 
 def policy_options(
-    policy: str, controller: dict[str, Any] | None, planner: dict[str, Any] | None = None
+    policy: str,
+    controller: dict[str, Any] | None,
+    planner: dict[str, Any] | None = None,
+    long_segment: float | None = None,
 ) -> dict[str, Any]:
     """Keyword arguments of :func:`agents.policies.make_baseline_policy` for ``policy`` with the
-    controller settings ``controller`` (:class:`controllers.ControllerConfig` fields) and the
+    controller settings ``controller`` (:class:`controllers.ControllerConfig` fields), the
     gait-planner settings ``planner`` (:class:`controllers.PlannerConfig` fields; None or
-    empty: none). Raises ``ValueError`` naming a bad field, or settings for ``passive``."""
+    empty: none) and the online identification's ``long_segment`` [s] (None: the policy's
+    default; see :class:`controllers.ReferencePolicy`). Raises ``ValueError`` naming a bad
+    field, or settings for ``passive``."""
     out: dict[str, Any] = {}
+    if long_segment is not None:
+        if policy == "passive":
+            raise ValueError(
+                "long_segment: applies to the pd and reference policies, not to passive"
+            )
+        allowed = "allowed: a number in [0, 1] (s; 0: short segments only)"
+        if isinstance(long_segment, bool) or not isinstance(long_segment, (int, float)):
+            raise ValueError(f"long_segment = {long_segment!r}; {allowed}")
+        if not (math.isfinite(long_segment) and 0 <= long_segment <= 1):
+            raise ValueError(f"long_segment = {long_segment!r}; {allowed}")
+        out["long_segment"] = float(long_segment)
     for name, value, cls, key in (
         ("controller", controller, ControllerConfig, "config"),
         ("planner", planner, PlannerConfig, "planner"),
@@ -556,6 +572,7 @@ def run_walks(
     on_walk: Callable[[Walk], None] | None = None,
     controller: dict[str, Any] | None = None,
     planner: dict[str, Any] | None = None,
+    long_segment: float | None = None,
 ) -> list[Walk]:
     """Walk ``policy`` on courses of random blocks of ``roughness`` until each walk fails or
     is censored, ``walkers`` walks at a time on one native vector env.
@@ -581,12 +598,14 @@ def run_walks(
             ``reference`` policies (None: their defaults).
         planner: :class:`controllers.PlannerConfig` fields of their gait planner (None: the
             robot's defaults).
+        long_segment: their online identification's long shooting segments [s] (None: the
+            policy's default; 0: short segments only).
 
     Returns:
         The walks in walk order.
     """
     check_run_args(policy, walks, walkers, step_cap, seed, max_step_time)
-    policy_kwargs = policy_options(policy, controller, planner)
+    policy_kwargs = policy_options(policy, controller, planner, long_segment)
     r = _nonneg("roughness", roughness, 1.0)
     probe = gym.make(env_id)
     robot, dt = probe.unwrapped.robot, float(probe.unwrapped.dt)

@@ -137,6 +137,14 @@ def configure(parser: argparse.ArgumentParser) -> None:
         "the robot's preset, e.g. clearance=0.003)",
     )
     parser.add_argument(
+        "--long-segment",
+        type=float_range(0.0, 1.0),
+        metavar="S",
+        help="the pd and reference policies' identification also fits segments of S seconds, "
+        "used where none shows a push (default 0.3; 0: segments of 0.15 s only, the fits "
+        "before this option)",
+    )
+    parser.add_argument(
         "--out", type=output_dir, default=Path("results/mfpt"), help="folder of the results"
     )
     parser.add_argument(
@@ -290,7 +298,7 @@ def run(args: argparse.Namespace) -> int:
     controller = dict(args.controller or ())
     planner = dict(args.planner or ())
     for policy in [p for p in policies if p != "passive"] or policies:
-        policy_options(policy, controller, planner)  # a bad setting stops the command here
+        policy_options(policy, controller, planner, args.long_segment)  # a bad one stops here
     out: Path = args.out
     with claim_output_folder(out, OUTPUTS, args.overwrite):
         return _measure(args, out, levels, policies, controller, planner)
@@ -325,6 +333,7 @@ def _measure(
             max_step_time=args.max_step_time,
             controller=controller if policy != "passive" else None,
             planner=planner if policy != "passive" else None,
+            long_segment=args.long_segment if policy != "passive" else None,
         )
     leg = results[0].leg_length
     settings = {
@@ -337,6 +346,7 @@ def _measure(
         "confidence": args.confidence,
         "controller": controller,
         "planner": planner,
+        "long_segment": args.long_segment,
         "leg_length": leg,
         "mfpt": "1/p footsteps (the failing one counted); p = failures / footsteps attempted",
     }

@@ -172,6 +172,20 @@ def test_planner_settings_reach_the_policies():
     assert walks[0].footsteps == 2 and not walks[0].failed
 
 
+def test_the_identifications_long_segments_reach_the_policies():
+    """``long_segment``: the pd and reference policies' identification (0: short segments)."""
+    assert policy_options("reference", None, None, 0.0) == {"long_segment": 0.0}
+    for policy, bad, match in (
+        ("passive", 0.3, "long_segment: applies to the pd and reference"),
+        ("reference", 1.5, r"long_segment = 1.5; allowed: a number in \[0, 1\]"),
+        ("pd", float("nan"), "long_segment = nan"),
+    ):
+        with pytest.raises(ValueError, match=match):
+            policy_options(policy, None, None, bad)
+    walks = run_walks("reference", 0.0, 1, walkers=1, step_cap=2, long_segment=0.0)
+    assert walks[0].footsteps == 2 and not walks[0].failed
+
+
 @pytest.mark.parametrize(
     ("kwargs", "match"),
     [

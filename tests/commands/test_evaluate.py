@@ -230,6 +230,8 @@ def test_controller_settings_from_the_command_line(tmp_path: Path, capsys, episo
         (["--policy", "reference", "--identify", "-1"], "--identify: must be"),
         (["--policy", "reference", "--leg-margin", "11"], "--leg-margin: must be"),
         (["--policy", "passive", "--leg-margin", "1"], "leg_margin: applies to the pd and"),
+        (["--policy", "reference", "--long-segment", "2"], "--long-segment: must be"),
+        (["--policy", "passive", "--long-segment", "0"], "long_segment: applies to the pd and"),
     ]
     for extra, message in bad:
         assert main([*argv, *extra]) == 2

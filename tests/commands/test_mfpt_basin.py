@@ -92,6 +92,8 @@ def test_a_folder_another_command_holds_is_refused(tmp_path: Path, capsys, comma
         (["--planner", "clearance=-1"], "PlannerConfig.clearance"),
         (["--planner", "reach=2"], "reach"),
         (["--policy", "passive", "--planner", "clearance=0.003"], "not to passive"),
+        (["--long-segment", "1.5"], "--long-segment"),
+        (["--policy", "passive", "--long-segment", "0"], "not to passive"),
     ],
 )
 def test_mfpt_bad_input_is_one_line_exit_2(tmp_path: Path, capsys, args, match):
@@ -133,6 +135,10 @@ def test_basin_and_mfpt_take_planner_settings(tmp_path: Path):
     data = json.loads((out / "mfpt.json").read_text())
     assert data["settings"]["planner"] == {"clearance": 0.003}
     assert data["levels"][0]["walks"][0]["footsteps"] == 2
+    out = tmp_path / "m0"
+    assert main([*argv, "--step-cap", "2", "--long-segment", "0", "--out", str(out)]) == 0
+    data = json.loads((out / "mfpt.json").read_text())
+    assert data["settings"]["long_segment"] == 0.0
 
 
 def test_basin_writes_results(tmp_path: Path, capsys):
