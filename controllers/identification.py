@@ -22,10 +22,12 @@ ones (a Huber loss; a segment that the fitted model still cannot explain, a push
 out and the fit repeated). Short segments see the ratio of ``p3`` and ``p5`` (the stance leg's
 inertia and gravity) but barely their level, which decides how much speed a step loses before its
 apex: a +-10 % robot moves ``p5`` by up to 98 %, and fits on segments of 0.15 s alone missed it by
-40 % (rms, on validation stairs courses). So every stance is also cut into segments of 0.3 s, and
-the fit on those is used where each of them is explained to :data:`EXPLAINED_RMS` standard
-deviations; a push within a long segment leaves it unexplained, and the fit on the short segments
-(which a push costs one segment) is used instead. The solver is an iteratively reweighted
+40 % (rms, on validation stairs courses). With ``long_segment`` every stance is also cut into
+segments of, say, 0.3 s, and the fit on those is used where each of them is explained to
+:data:`EXPLAINED_RMS` standard deviations; a push within a long segment leaves it unexplained, and
+the fit on the short segments (which a push costs one segment) is used instead. A small push (0.05
+m/s at the hip) leaves a long segment explained, and the long fit then takes the push for a robot
+with other ``p3`` and ``p5``: an option, not the default. The solver is an iteratively reweighted
 Levenberg-Marquardt on the Huber cost: a segment's residuals depend on the coefficients and its own
 initial state only, so each iteration eliminates the segments' 4 x 4 blocks (a Schur complement)
 and costs in proportion to the number of segments, where a dense solver's cost grows with its cube;
@@ -371,10 +373,10 @@ class _Shooting:
 class SwingIdentifier:
     """Identifies the swing-phase coefficients from stances of measured angles and inputs.
 
-    Every stance is cut twice: into short segments (``segment``), which a push costs one
-    segment of data, and into long ones (``long_segment``), which see the level of ``p3`` and
+    Every stance is cut into short segments (``segment``), which a push costs one segment of
+    data, and with ``long_segment`` also into long ones, which see the level of ``p3`` and
     ``p5`` (the stance leg's inertia and gravity) that short ones barely do. The fit on the
-    long segments is the one returned where each of its segments is explained to
+    long segments is then the one returned where each of its segments is explained to
     :data:`EXPLAINED_RMS` (no push seen); otherwise the fit on the short ones.
 
     Args:
@@ -383,7 +385,8 @@ class SwingIdentifier:
         angle_sigma: standard deviation of a measured angle [rad] (encoder noise and
             quantisation), > 0.
         segment: length of a short shooting segment [s], > 0.
-        long_segment: length of a long shooting segment [s], >= 0 (0: short segments only).
+        long_segment: length of a long shooting segment [s], >= 0 (0, the default: short
+            segments only).
         prior: prior standard deviations relative to the nominal coefficients (7 numbers > 0;
             :data:`PRIOR`), of the fit on the short segments.
         long_prior: the same for the fit on the long segments (:data:`LONG_PRIOR`).
@@ -400,7 +403,7 @@ class SwingIdentifier:
         dt: float,
         angle_sigma: float,
         segment: float = 0.15,
-        long_segment: float = 0.3,
+        long_segment: float = 0.0,
         prior: tuple[float, ...] = PRIOR,
         long_prior: tuple[float, ...] = LONG_PRIOR,
         substeps: int = 2,

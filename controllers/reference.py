@@ -52,9 +52,6 @@ __all__ = ["ADDED_SETTINGS", "PDPolicy", "ReferencePolicy", "make_reference_poli
 
 #: footsteps after which the reference policy identifies the swing dynamics by default
 DEFAULT_IDENTIFY = 6
-#: length of the identification's long shooting segments by default [s]
-#: (:class:`controllers.identification.SwingIdentifier`)
-DEFAULT_LONG_SEGMENT = 0.3
 #: the leg length is re-identified when the localisation's drift is this many of its standard
 #: deviations from zero
 DRIFT_Z = 1.5
@@ -118,9 +115,9 @@ class ReferencePolicy:
             :class:`controllers.records.IdentificationRecord` per fit).
         long_segment: the identification's long shooting segments [s], in [0, 1]: where each
             of them is explained (no push seen) their fit, which sees the level of the stance
-            leg's inertia and gravity, replaces the fit on short segments; 0: short segments
-            only (the fits of releases before this option). Default
-            :data:`DEFAULT_LONG_SEGMENT`.
+            leg's inertia and gravity, replaces the fit on the short segments (0.3 walks more
+            stairs courses under model error and fewer lightly pushed ones; README, "Off
+            nominal"); 0 (default): short segments only.
         leg_margin: foothold margins from the leg-length uncertainty: at every touchdown the
             planner's ``edge_margin`` is widened by ``leg_margin`` standard deviations of where
             a step of ``step_length`` lands, from the localiser's belief about the drift rate
@@ -147,7 +144,7 @@ class ReferencePolicy:
         odometry_error: float = 0.02,
         foot_estimate: str = "mean",
         identify: int = DEFAULT_IDENTIFY,
-        long_segment: float = DEFAULT_LONG_SEGMENT,
+        long_segment: float = 0.0,
         leg_margin: float = 0.0,
         **controller_kwargs: Any,
     ):

@@ -69,7 +69,7 @@ def test_fit_recovers_the_coefficients_of_a_perturbed_robot_from_its_stances():
     true = nom.perturbed({**ERRORS, "Fv": 0.3})
     theta_true = coefficients_in_nominal_scale(true, nom)
     P = true.vector()
-    ident = SwingIdentifier(nom, DT, angle_sigma=1e-5)
+    ident = SwingIdentifier(nom, DT, angle_sigma=1e-5, long_segment=0.3)
     ident.leg_length = true.l  # what the localisation measures
     starts = [[-0.5, -0.25, 2.0, 1.2], [-0.42, -0.2, 1.6, 0.9], [-0.48, -0.23, 2.4, 1.0]]
     for i, x0 in enumerate(starts):
@@ -161,7 +161,7 @@ def test_a_push_within_a_long_segment_falls_back_to_the_short_segments_fit():
 
 def ident_long_fit(nom, stances):
     """Each long segment's rms residual [standard deviations] under the fit on them."""
-    ident = SwingIdentifier(nom, DT, angle_sigma=1.5e-3)
+    ident = SwingIdentifier(nom, DT, angle_sigma=1.5e-3, long_segment=0.3)
     for q, u in stances:
         ident.add_stance(q, u)
     which = list(range(len(ident._long.segments)))
@@ -208,6 +208,16 @@ def test_bad_identify_values_are_errors(identify):
     env = gym.make("roughwalk/CompassGaitStairs-v0")
     with pytest.raises(ValueError, match="identify = .*an integer >= 0"):
         make_reference_policy(env, identify=identify)
+
+
+def test_long_segments_are_an_option_of_the_policy():
+    """Off by default (the short segments' fits); ``long_segment`` reaches the identifier and
+    the policy's recorded settings."""
+    env = gym.make("roughwalk/CompassGaitStairs-v0")
+    default, option = make_reference_policy(env), make_reference_policy(env, long_segment=0.3)
+    assert default.identifier._long is None and default.settings()["long_segment"] == 0.0
+    assert option.identifier.long_samples == round(0.3 / option.identifier.dt)
+    assert option.settings()["long_segment"] == 0.3
 
 
 @pytest.mark.parametrize("long_segment", [-0.1, 1.5, float("nan"), "0.3", True])
