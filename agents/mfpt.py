@@ -46,6 +46,7 @@ from scipy import stats
 import envs  # noqa: F401  (registers the ids)
 from controllers.controller import ControllerConfig
 from controllers.planner import PlannerConfig
+from controllers.reference import checked_long_segment
 from envs.physics.terrain import MAX_COURSE_LENGTH, terrain_spec
 
 from .policies import BASELINES, make_baseline_policy
@@ -537,12 +538,7 @@ def policy_options(
             raise ValueError(
                 "long_segment: applies to the pd and reference policies, not to passive"
             )
-        allowed = "allowed: a number in [0, 1] (s; 0: short segments only)"
-        if isinstance(long_segment, bool) or not isinstance(long_segment, (int, float)):
-            raise ValueError(f"long_segment = {long_segment!r}; {allowed}")
-        if not (math.isfinite(long_segment) and 0 <= long_segment <= 1):
-            raise ValueError(f"long_segment = {long_segment!r}; {allowed}")
-        out["long_segment"] = float(long_segment)
+        out["long_segment"] = checked_long_segment(long_segment)
     for name, value, cls, key in (
         ("controller", controller, ControllerConfig, "config"),
         ("planner", planner, PlannerConfig, "planner"),

@@ -73,6 +73,17 @@ ADDED_SETTINGS: dict[str, Any] = {
 }
 
 
+def checked_long_segment(value: Any) -> float:
+    """The identification's long segments [s] (:class:`ReferencePolicy`'s ``long_segment``):
+    a number in [0, 1]; anything else raises ``ValueError`` naming it and the range."""
+    allowed = "allowed: a number in [0, 1] (s; 0: short segments only)"
+    if isinstance(value, bool) or not isinstance(value, (int, float, np.number)):
+        raise ValueError(f"long_segment = {value!r}; {allowed}")
+    if not (math.isfinite(value) and 0 <= value <= 1):
+        raise ValueError(f"long_segment = {value!r}; {allowed}")
+    return float(value)
+
+
 class ReferencePolicy:
     """Sensor-based walking policy: ``action = policy(observation)``.
 
@@ -158,12 +169,7 @@ class ReferencePolicy:
         if identify < 0:
             raise ValueError(f"identify = {identify!r}; allowed: an integer >= 0 (footsteps)")
         self.identify = int(identify)
-        allowed = "allowed: a number in [0, 1] (s; 0: short segments only)"
-        if isinstance(long_segment, bool) or not isinstance(long_segment, (int, float, np.number)):
-            raise ValueError(f"long_segment = {long_segment!r}; {allowed}")
-        if not (math.isfinite(long_segment) and 0 <= long_segment <= 1):
-            raise ValueError(f"long_segment = {long_segment!r}; {allowed}")
-        self.long_segment = float(long_segment)
+        self.long_segment = checked_long_segment(long_segment)
         allowed = f"allowed: a number in [0, {MAX_LEG_MARGIN}] (standard deviations)"
         if isinstance(leg_margin, bool) or not isinstance(leg_margin, (int, float, np.number)):
             raise ValueError(f"leg_margin = {leg_margin!r}; {allowed}")

@@ -69,22 +69,22 @@ def test_fit_recovers_the_coefficients_of_a_perturbed_robot_from_its_stances():
     true = nom.perturbed({**ERRORS, "Fv": 0.3})
     theta_true = coefficients_in_nominal_scale(true, nom)
     P = true.vector()
-    ident = SwingIdentifier(nom, DT, angle_sigma=1e-5, long_segment=0.3)
-    ident.leg_length = true.l  # what the localisation measures
     starts = [[-0.5, -0.25, 2.0, 1.2], [-0.42, -0.2, 1.6, 0.9], [-0.48, -0.23, 2.4, 1.0]]
-    for i, x0 in enumerate(starts):
-        u = stance_inputs(90, i)
-        # the same input on the true robot, whose input gain differs (what the env does)
-        q = simulate_swing(P, np.array(x0), u, DT, 4)
-        assert ident.add_stance(q, u) == 3  # 0.45 s in segments of 0.15 s
-    fit = ident.fit()
-    # noise-free stances explain the long segments (0.3 s and the 0.15 s tail): that fit is
-    # the one returned; the short segments' alone recovers the coefficients as well
-    assert fit.long and fit.segments == 6 and fit.rms < 1e-5  # 2 substeps, not 4
-    short = ident._fit(ident._short, list(range(9)), np.zeros(7), ident.prior)[0]
-    for f in (fit, short):
-        assert f.significant
-        err = f.theta / theta_true - 1
+    # short segments alone (the default), and with long ones: noise-free stances explain the
+    # long segments (0.3 s and the 0.15 s tail of each stance), whose fit is then returned
+    for long_segment, segments in ((0.0, 9), (0.3, 6)):
+        ident = SwingIdentifier(nom, DT, angle_sigma=1e-5, long_segment=long_segment)
+        ident.leg_length = true.l  # what the localisation measures
+        for i, x0 in enumerate(starts):
+            u = stance_inputs(90, i)
+            # the same input on the true robot, whose input gain differs (what the env does)
+            q = simulate_swing(P, np.array(x0), u, DT, 4)
+            assert ident.add_stance(q, u) == 3  # 0.45 s in segments of 0.15 s
+        fit = ident.fit()
+        assert fit.long == (long_segment > 0)
+        assert fit.segments == segments and fit.rms < 1e-5  # the fit integrates with 2 substeps
+        assert fit.significant
+        err = fit.theta / theta_true - 1
         assert np.all(np.abs(err[:5]) < 2e-3), dict(zip(COEFFICIENTS, err))
         assert abs(err[6]) < 0.05  # viscous friction: a small term, still seen
     # and the nominal robot's own stance (integrated as the fit does) gives back the nominal
