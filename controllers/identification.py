@@ -26,18 +26,19 @@ apex: a +-10 % robot moves ``p5`` by up to 98 %, and fits on segments of 0.15 s 
 segments of, say, 0.3 s, and the fit on those is used where each of them is explained to
 :data:`EXPLAINED_RMS` standard deviations; a push within a long segment leaves it unexplained, and
 the fit on the short segments (which a push costs one segment) is used instead. A small push (0.05
-m/s at the hip) leaves a long segment explained, and the long fit then takes the push for a robot
-with other ``p3`` and ``p5``: an option, not the default. The solver is an iteratively reweighted
-Levenberg-Marquardt on the Huber cost: a segment's residuals depend on the coefficients and its own
-initial state only, so each iteration eliminates the segments' 4 x 4 blocks (a Schur complement)
-and costs in proportion to the number of segments, where a dense solver's cost grows with its cube;
-the coefficients' covariance is the inverse of the same Schur complement at the solution.
-Equation-error fits (regressing on differentiated encoder readings) are biased here: the unactuated
-row of the dynamics is homogeneous in ``theta``, and noise in the differentiated angles pulls
-``p3`` and ``p4 + p5`` to zero together. Output error puts the noise where it is, on the measured
-angles. A Gaussian prior centred on the nominal coefficients (:data:`PRIOR`) keeps the directions
-the data barely see (the absolute level of ``p3`` and ``p5`` when only their ratio is excited) near
-the nominal robot.
+m/s at the hip) leaves a long segment explained, and the long fit can take the push for a robot
+with other ``p3`` and ``p5``; so the long fit only refines a model the short segments' fit already
+rejects (model error makes it significant, a push on a nominal robot seldom does). An option, not
+the default. The solver is an iteratively reweighted Levenberg-Marquardt on the Huber cost: a
+segment's residuals depend on the coefficients and its own initial state only, so each iteration
+eliminates the segments' 4 x 4 blocks (a Schur complement) and costs in proportion to the number of
+segments, where a dense solver's cost grows with its cube; the coefficients' covariance is the
+inverse of the same Schur complement at the solution. Equation-error fits (regressing on
+differentiated encoder readings) are biased here: the unactuated row of the dynamics is homogeneous
+in ``theta``, and noise in the differentiated angles pulls ``p3`` and ``p4 + p5`` to zero together.
+Output error puts the noise where it is, on the measured angles. A Gaussian prior centred on the
+nominal coefficients (:data:`PRIOR`) keeps the directions the data barely see (the absolute level
+of ``p3`` and ``p5`` when only their ratio is excited) near the nominal robot.
 
 :func:`robot_from_coefficients` turns the identified coefficients into the nearest robot
 (smallest relative change of ``m, mH, mHg, Ic, lc``) with a given leg length: the leg length is
@@ -376,8 +377,9 @@ class SwingIdentifier:
     Every stance is cut into short segments (``segment``), which a push costs one segment of
     data, and with ``long_segment`` also into long ones, which see the level of ``p3`` and
     ``p5`` (the stance leg's inertia and gravity) that short ones barely do. The fit on the
-    long segments is then the one returned where each of its segments is explained to
-    :data:`EXPLAINED_RMS` (no push seen); otherwise the fit on the short ones.
+    long segments is then the one returned where the short segments' fit rejects the nominal
+    model and each long segment is explained to :data:`EXPLAINED_RMS` (no push seen);
+    otherwise the fit on the short ones.
 
     Args:
         robot: the nominal robot (the prior's centre, and the input gain kept).
@@ -481,7 +483,8 @@ class SwingIdentifier:
         residual above :data:`OUTLIER_RMS` standard deviations: a push, a scuff) are left out
         and the fit is repeated without them; :attr:`IdentifiedModel.segments` counts those
         kept. The fit on the long segments (from the nominal coefficients) replaces it where
-        every long segment is explained to :data:`EXPLAINED_RMS`."""
+        that fit is significant (the data reject the nominal model) and every long segment is
+        explained to :data:`EXPLAINED_RMS`."""
         if not self._short.segments:
             return None
         first = self._fit(self._short, list(range(len(self._short.segments))), self._z, self.prior)
@@ -494,7 +497,7 @@ class SwingIdentifier:
             if again is not None:
                 fit = again[0]
         self._z = fit.relative.copy()  # the next short fit starts here, never at a long fit
-        if self._long is not None and self._long.segments:
+        if self._long is not None and self._long.segments and fit.significant:
             every = list(range(len(self._long.segments)))
             long = self._fit(self._long, every, np.zeros(len(COEFFICIENTS)), self.long_prior)
             if long is not None and np.all(long[1] <= EXPLAINED_RMS):

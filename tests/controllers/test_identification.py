@@ -159,6 +159,23 @@ def test_a_push_within_a_long_segment_falls_back_to_the_short_segments_fit():
     np.testing.assert_array_equal(fits[0].relative, fits[1].relative)
 
 
+def test_the_long_segments_refine_only_a_model_the_short_ones_reject():
+    """On the nominal robot, unpushed, the long segments are explained, but the short
+    segments' fit does not reject the nominal model: it is the fit returned, as without long
+    segments (a long fit is free to take a small push for another robot)."""
+    nom = nominal()
+    stances = walking_stances(nom.vector())
+    assert np.max(ident_long_fit(nom, stances)) <= EXPLAINED_RMS
+    fits = []
+    for long_segment in (0.3, 0.0):
+        ident = SwingIdentifier(nom, DT, angle_sigma=1.5e-3, long_segment=long_segment)
+        for q, u in stances:
+            ident.add_stance(q, u)
+        fits.append(ident.fit())
+    assert not fits[0].significant and not fits[0].long
+    np.testing.assert_array_equal(fits[0].relative, fits[1].relative)
+
+
 def ident_long_fit(nom, stances):
     """Each long segment's rms residual [standard deviations] under the fit on them."""
     ident = SwingIdentifier(nom, DT, angle_sigma=1.5e-3, long_segment=0.3)
