@@ -480,8 +480,9 @@ def make_eval_env(
             localisation's belief the stance foot is corrected to: ``"mean"`` (None: the
             policy's default) or ``"selected"`` (see :class:`controllers.ReferencePolicy`).
         long_segment: for the ``pd`` and ``reference`` baselines, the online identification's
-            long shooting segments [s] (in [0, 1]; 0: short segments only; None: the policy's
-            default, 0; see :class:`controllers.ReferencePolicy`).
+            long shooting segments [s] (in [0, 1]; 0: short segments only, the fits before
+            this default; None: the policy's default, 0.3; see
+            :class:`controllers.ReferencePolicy`).
 
     Returns:
         ``(env, policy, env_id, env_kwargs)``, with the env id and keyword arguments used.

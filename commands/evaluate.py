@@ -282,8 +282,8 @@ def configure(parser: argparse.ArgumentParser) -> None:
         type=float_range(0.0, 1.0),
         metavar="S",
         help=f"the {' and '.join(CONTROLLED_BASELINES)} policies' identification also fits "
-        "segments of S seconds, used where none shows a push (default 0: segments of 0.15 s "
-        "only; 0.3 walks more stairs courses under model error, fewer lightly pushed ones)",
+        "segments of S seconds, used where none shows a push and the data reject the nominal "
+        "model (default 0.3; 0: segments of 0.15 s only, the fits before this default)",
     )
     parser.add_argument(
         "--leg-margin",

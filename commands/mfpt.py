@@ -141,7 +141,8 @@ def configure(parser: argparse.ArgumentParser) -> None:
         type=float_range(0.0, 1.0),
         metavar="S",
         help="the pd and reference policies' identification also fits segments of S seconds, "
-        "used where none shows a push (default 0: segments of 0.15 s only)",
+        "used where none shows a push and the data reject the nominal model (default 0.3; 0: "
+        "segments of 0.15 s only, the fits before this default)",
     )
     parser.add_argument(
         "--out", type=output_dir, default=Path("results/mfpt"), help="folder of the results"

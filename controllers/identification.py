@@ -22,18 +22,19 @@ ones (a Huber loss; a segment that the fitted model still cannot explain, a push
 out and the fit repeated). Short segments see the ratio of ``p3`` and ``p5`` (the stance leg's
 inertia and gravity) but barely their level, which decides how much speed a step loses before its
 apex: a +-10 % robot moves ``p5`` by up to 98 %, and fits on segments of 0.15 s alone missed it by
-40 % (rms, on validation stairs courses). With ``long_segment`` every stance is also cut into
-segments of, say, 0.3 s, and the fit on those is used where each of them is explained to
+40 % (rms, on validation stairs courses). So every stance is also cut into segments of 0.3 s
+(``long_segment``), and the fit on those is used where each of them is explained to
 :data:`EXPLAINED_RMS` standard deviations; a push within a long segment leaves it unexplained, and
 the fit on the short segments (which a push costs one segment) is used instead. A small push (0.05
 m/s at the hip) leaves a long segment explained, and the long fit can take the push for a robot
 with other ``p3`` and ``p5``; so the long fit only refines a model the short segments' fit already
-rejects (model error makes it significant, a push on a nominal robot seldom does). An option, not
-the default. The solver is an iteratively reweighted Levenberg-Marquardt on the Huber cost: a
-segment's residuals depend on the coefficients and its own initial state only, so each iteration
-eliminates the segments' 4 x 4 blocks (a Schur complement) and costs in proportion to the number of
-segments, where a dense solver's cost grows with its cube; the coefficients' covariance is the
-inverse of the same Schur complement at the solution. Equation-error fits (regressing on
+rejects (model error makes it significant, a push on a nominal robot seldom does). The default
+(:data:`DEFAULT_LONG_SEGMENT`); 0 turns it off. The solver is an iteratively reweighted
+Levenberg-Marquardt on the Huber cost: a segment's residuals depend on the coefficients and its own
+initial state only, so each iteration eliminates the segments' 4 x 4 blocks (a Schur complement)
+and costs in proportion to the number of segments, where a dense solver's cost grows with its
+cube; the coefficients' covariance is the inverse of the same Schur complement at the solution.
+Equation-error fits (regressing on
 differentiated encoder readings) are biased here: the unactuated row of the dynamics is homogeneous
 in ``theta``, and noise in the differentiated angles pulls ``p3`` and ``p4 + p5`` to zero together.
 Output error puts the noise where it is, on the measured angles. A Gaussian prior centred on the
@@ -87,6 +88,8 @@ PRIOR = (0.15, 0.15, 0.15, 0.15, 0.15, 0.5, 0.5)
 #: mid-stance pulled its p3 and p5 by half on a nominal robot
 LONG_PRIOR = (0.15, 0.15, 0.3, 0.15, 0.6, 0.5, 0.5)
 _MIN_SAMPLES = 12  # a shorter segment is dropped
+#: length of a long shooting segment by default [s]
+DEFAULT_LONG_SEGMENT = 0.3
 #: residuals beyond this many standard deviations count linearly (Huber loss)
 ROBUST_SCALE = 3.0
 #: a segment whose rms residual under the fit exceeds this many standard deviations is left out
@@ -375,7 +378,7 @@ class SwingIdentifier:
     """Identifies the swing-phase coefficients from stances of measured angles and inputs.
 
     Every stance is cut into short segments (``segment``), which a push costs one segment of
-    data, and with ``long_segment`` also into long ones, which see the level of ``p3`` and
+    data, and into long ones (``long_segment``), which see the level of ``p3`` and
     ``p5`` (the stance leg's inertia and gravity) that short ones barely do. The fit on the
     long segments is then the one returned where the short segments' fit rejects the nominal
     model and each long segment is explained to :data:`EXPLAINED_RMS` (no push seen);
@@ -387,8 +390,8 @@ class SwingIdentifier:
         angle_sigma: standard deviation of a measured angle [rad] (encoder noise and
             quantisation), > 0.
         segment: length of a short shooting segment [s], > 0.
-        long_segment: length of a long shooting segment [s], >= 0 (0, the default: short
-            segments only).
+        long_segment: length of a long shooting segment [s], >= 0 (default
+            :data:`DEFAULT_LONG_SEGMENT`; 0: short segments only).
         prior: prior standard deviations relative to the nominal coefficients (7 numbers > 0;
             :data:`PRIOR`), of the fit on the short segments.
         long_prior: the same for the fit on the long segments (:data:`LONG_PRIOR`).
@@ -405,7 +408,7 @@ class SwingIdentifier:
         dt: float,
         angle_sigma: float,
         segment: float = 0.15,
-        long_segment: float = 0.0,
+        long_segment: float = DEFAULT_LONG_SEGMENT,
         prior: tuple[float, ...] = PRIOR,
         long_prior: tuple[float, ...] = LONG_PRIOR,
         substeps: int = 2,

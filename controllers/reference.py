@@ -44,7 +44,7 @@ from envs.physics.actuator import action_from_input, input_from_action
 
 from .controller import ControllerConfig, PDController, TransverseController
 from .estimator import IMPACT, START, SensorStateEstimator
-from .identification import SwingIdentifier, robot_from_coefficients
+from .identification import DEFAULT_LONG_SEGMENT, SwingIdentifier, robot_from_coefficients
 from .planner import GaitPlanner, PlannerConfig
 from .records import IdentificationRecord
 
@@ -126,9 +126,9 @@ class ReferencePolicy:
             :class:`controllers.records.IdentificationRecord` per fit).
         long_segment: the identification's long shooting segments [s], in [0, 1]: where each
             of them is explained (no push seen) their fit, which sees the level of the stance
-            leg's inertia and gravity, replaces the fit on the short segments (0.3 walks more
-            stairs courses under model error and fewer lightly pushed ones; README, "Off
-            nominal"); 0 (default): short segments only.
+            leg's inertia and gravity, replaces the fit on the short segments where that fit
+            rejects the nominal model; 0: short segments only (the fits of releases before
+            this default). Default :data:`controllers.identification.DEFAULT_LONG_SEGMENT`.
         leg_margin: foothold margins from the leg-length uncertainty: at every touchdown the
             planner's ``edge_margin`` is widened by ``leg_margin`` standard deviations of where
             a step of ``step_length`` lands, from the localiser's belief about the drift rate
@@ -155,7 +155,7 @@ class ReferencePolicy:
         odometry_error: float = 0.02,
         foot_estimate: str = "mean",
         identify: int = DEFAULT_IDENTIFY,
-        long_segment: float = 0.0,
+        long_segment: float = DEFAULT_LONG_SEGMENT,
         leg_margin: float = 0.0,
         **controller_kwargs: Any,
     ):

@@ -13,6 +13,7 @@ from controllers import make_reference_policy
 from controllers.identification import (
     CHI2_99,
     COEFFICIENTS,
+    DEFAULT_LONG_SEGMENT,
     EXPLAINED_RMS,
     ROBUST_SCALE,
     SwingIdentifier,
@@ -227,14 +228,14 @@ def test_bad_identify_values_are_errors(identify):
         make_reference_policy(env, identify=identify)
 
 
-def test_long_segments_are_an_option_of_the_policy():
-    """Off by default (the short segments' fits); ``long_segment`` reaches the identifier and
-    the policy's recorded settings."""
+def test_long_segments_are_the_policys_default_and_can_be_turned_off():
+    """On by default (segments of 0.3 s); ``long_segment=0`` leaves the short segments' fits
+    alone; the value reaches the identifier and the policy's recorded settings."""
     env = gym.make("roughwalk/CompassGaitStairs-v0")
-    default, option = make_reference_policy(env), make_reference_policy(env, long_segment=0.3)
-    assert default.identifier._long is None and default.settings()["long_segment"] == 0.0
-    assert option.identifier.long_samples == round(0.3 / option.identifier.dt)
-    assert option.settings()["long_segment"] == 0.3
+    default, off = make_reference_policy(env), make_reference_policy(env, long_segment=0.0)
+    assert default.settings()["long_segment"] == DEFAULT_LONG_SEGMENT == 0.3
+    assert default.identifier.long_samples == round(0.3 / default.identifier.dt)
+    assert off.identifier._long is None and off.settings()["long_segment"] == 0.0
 
 
 @pytest.mark.parametrize("long_segment", [-0.1, 1.5, float("nan"), "0.3", True])
