@@ -69,7 +69,7 @@ MAX_LEG_MARGIN = 10.0
 ADDED_SETTINGS: dict[str, Any] = {
     "foot_estimate": "mean",
     "long_segment": 0.0,
-    "planner": {"speed_reserve": 0.0, "dip_floor": 0.0},
+    "planner": {"speed_reserve": 0.0, "dip_floor": 0.0, "drop_edge_margin": 0.0},
 }
 
 

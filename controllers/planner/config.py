@@ -69,7 +69,13 @@ class PlannerConfig:
             (room for the next swing's retracted foot to clear the riser) [m/m].
         rise_margin: extra distance from a step-up riser ahead of a foothold, per metre of rise
             (room for the next swing foot to clear the riser) [m/m].
-        relaxed_margin: the fraction of ``drop_margin`` and ``rise_margin`` a step keeps where
+        drop_edge_margin: footholds closer than ``edge_margin + drop_edge_margin`` to a
+            step-down riser (ahead of them or behind them) rank after every other admissible
+            foothold [m]: a preference, not a rule. A foot that lands off its plan (a leg
+            longer or shorter than the model's, a foot estimated off) otherwise passes such a
+            riser and swings back into its face. 0 (default): off.
+        relaxed_margin: the fraction of ``drop_margin``, ``rise_margin`` and
+            ``drop_edge_margin`` a step keeps where
             the full margins leave its stance foot no admissible foothold, in [0, 1] (1: no
             relaxation). On stairs the admissible footholds form windows; a foot that landed
             between two (a model error, a push) would otherwise have no step at all. The step's
@@ -176,6 +182,7 @@ class PlannerConfig:
     edge_margin: float = 0.02
     drop_margin: float = 4.0
     rise_margin: float = 4.0
+    drop_edge_margin: float = 0.0
     relaxed_margin: float = 1.0
     q1_min: float = 0.2
     q1_max: float = 1.0
@@ -260,7 +267,8 @@ class PlannerConfig:
             if not getattr(self, name) > 0:
                 raise ValueError(f"PlannerConfig.{name} = {getattr(self, name)!r}; allowed: > 0")
         nonneg = (
-            "edge_margin drop_margin rise_margin relaxed_margin max_rise max_drop clearance "
+            "edge_margin drop_margin rise_margin drop_edge_margin relaxed_margin max_rise max_drop "
+            "clearance "
             "lookahead_rise arm_clearance retracted_clearance face_clearance touchdown_slope "
             "gait_min_thetadot speed_reserve end_thetadot_floor w_speed w_end w_shape w_torque "
             "w_slope time_budget"
@@ -298,12 +306,15 @@ class PlannerConfig:
     def relaxed_rules(self) -> FootholdRules | None:
         """The foothold rules with the riser margins scaled by ``relaxed_margin`` (None when
         that changes nothing)."""
-        if self.relaxed_margin >= 1 or (self.drop_margin == 0 and self.rise_margin == 0):
+        if self.relaxed_margin >= 1 or (
+            self.drop_margin == 0 and self.rise_margin == 0 and self.drop_edge_margin == 0
+        ):
             return None
         return dataclasses.replace(
             self.rules(),
             drop_margin=self.drop_margin * self.relaxed_margin,
             rise_margin=self.rise_margin * self.relaxed_margin,
+            drop_edge_margin=self.drop_edge_margin * self.relaxed_margin,
         )
 
     def _make_rules(self) -> FootholdRules:
@@ -314,6 +325,7 @@ class PlannerConfig:
             edge_margin=self.edge_margin,
             drop_margin=self.drop_margin,
             rise_margin=self.rise_margin,
+            drop_edge_margin=self.drop_edge_margin,
             q1_min=self.q1_min,
             q1_max=self.q1_max,
             max_rise=self.max_rise,

@@ -138,6 +138,11 @@ class FootholdRules:
             behind it, so that the next swing's retracted foot clears the riser [m/m].
         rise_margin: extra distance per metre of rise between a foothold and a step-up riser
             ahead of it, so that the next swing foot clears the riser [m/m].
+        drop_edge_margin: a foothold closer than ``edge_margin + drop_edge_margin`` to a
+            step-down riser, ahead of it or behind it, ranks after every candidate that is not
+            (a preference, not a rule) [m]: a swing foot that lands off its plan (a leg longer
+            or shorter than the model's, a foot estimated off) passes such a riser and comes
+            back into its face.
     """
 
     step_length: float
@@ -151,13 +156,17 @@ class FootholdRules:
     resolution: float = 0.002
     drop_margin: float = 4.0
     rise_margin: float = 4.0
+    drop_edge_margin: float = 0.0
 
     def __post_init__(self) -> None:
         for name in ("step_length", "step_min", "step_max", "q1_min", "q1_max", "resolution"):
             v = getattr(self, name)
             if not (math.isfinite(v) and v > 0):
                 raise ValueError(f"FootholdRules.{name} = {v!r}; allowed: finite > 0")
-        for name in ("edge_margin", "max_rise", "max_drop", "drop_margin", "rise_margin"):
+        for name in (
+            "edge_margin", "max_rise", "max_drop", "drop_margin", "rise_margin",
+            "drop_edge_margin",
+        ):  # fmt: skip
             v = getattr(self, name)
             if not (math.isfinite(v) and v >= 0):
                 raise ValueError(f"FootholdRules.{name} = {v!r}; allowed: finite >= 0")
@@ -204,7 +213,8 @@ def candidate_footholds(
     x, y, seen = _foothold_table(
         x0, y0, n, rules.step_min, rules.resolution, tmap.xs, tmap.ys, tmap.features,
         tmap._face_arr, rules.edge_margin, rules.drop_margin, rules.rise_margin,
-        rules.max_rise, rules.max_drop, rules.q1_min, rules.q1_max, float(l), rules.step_length,
+        rules.drop_edge_margin, rules.max_rise, rules.max_drop, rules.q1_min, rules.q1_max,
+        float(l), rules.step_length,
         math.nan if theta_target is None else float(theta_target),
         math.nan if sigma_target is None else float(sigma_target), mode,
     )  # fmt: skip
@@ -420,7 +430,8 @@ class FootholdChains:
 @njit(cache=True, error_model="numpy")
 def _foothold_table(
     x0, y0, n, step_min, res, tx, ty, features, faces, edge_margin, drop_margin, rise_margin,
-    max_rise, max_drop, q1_min, q1_max, l, step_length, theta_target, sigma_target, mode,
+    drop_edge_margin, max_rise, max_drop, q1_min, q1_max, l, step_length, theta_target,
+    sigma_target, mode,
 ):  # fmt: skip
     """The admissible footholds among ``x0 + step_min + res * k`` (``x, y`` best first) and what
     was seen: whether any candidate is away from edges, also within the height bounds, also
@@ -434,7 +445,8 @@ def _foothold_table(
     ok_h = np.empty(n, dtype=np.bool_)
     ok_reach = np.empty(n, dtype=np.bool_)
     nt, nf = tx.size, features.size
-    reach = x0 + step_min + res * (n - 1) + edge_margin + rise_margin * max_rise
+    far = max(rise_margin * max_rise, drop_edge_margin)
+    reach = x0 + step_min + res * (n - 1) + edge_margin + far
     for k in range(n):
         xk = x0 + step_min + res * k
         yk = terrain_height(tx, ty, nt, xk)
@@ -448,6 +460,7 @@ def _foothold_table(
             right = features[min(max(i, 0), nf - 1)]
             near = min(abs(xk - left), abs(right - xk))
         ok = near >= edge_margin
+        demote = False
         for f in range(faces.shape[0]):
             xf, ya, yb = faces[f, 0], faces[f, 1], faces[f, 2]
             if xf < x0 or xf > reach:
@@ -456,6 +469,8 @@ def _foothold_table(
                 ok = ok and (xk <= xf or xk - xf >= edge_margin + drop_margin * (ya - yb))
             if 0 < yb - ya <= max_rise:  # a step up ahead of the candidate (not a wall)
                 ok = ok and (xk >= xf or xf - xk >= edge_margin + rise_margin * (yb - ya))
+            if ya > yb and abs(xf - xk) < edge_margin + drop_edge_margin:
+                demote = True  # a step down just ahead of the candidate or just behind it
         ok_edge[k] = ok
         ok_h[k] = d <= max_rise and d >= -max_drop
         dx = xk - x0
@@ -467,6 +482,8 @@ def _foothold_table(
             score[k] = abs(q2 - theta_target) + 0.1 * abs(dx - step_length) / l
             if mode == 2:
                 score[k] += 2.0 * abs(q2 - q1 - sigma_target)
+        if demote:
+            score[k] += 100.0  # ranked after every candidate clear of such a riser
     # admissible candidates by score, ties in order of x (a stable insertion sort)
     order = np.empty(n, dtype=np.int64)
     m = 0

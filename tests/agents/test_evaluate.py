@@ -357,7 +357,7 @@ def test_an_agent_on_a_changed_base_is_warned_naming_the_settings(tmp_path):
     assert [b["wrapper"] for b in now] == ["ResidualWrapper"] and settings_changes(now, now) == []
     # a base recorded before an option existed had its old behaviour (ADDED_SETTINGS)
     older = [{k: v for k, v in now[0].items() if k != "foot_estimate"}]
-    added = ("speed_reserve", "dip_floor")
+    added = ("speed_reserve", "dip_floor", "drop_edge_margin")
     older[0]["planner"] = {k: v for k, v in now[0]["planner"].items() if k not in added}
     other = [{**now[0], "foot_estimate": "selected"}]
     reserve = [{**now[0], "planner": {**now[0]["planner"], "speed_reserve": 0.4}}]

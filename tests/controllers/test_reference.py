@@ -184,3 +184,23 @@ def test_settings_are_the_resolved_ones_in_json_types():
     pd = PDPolicy(env, kp=300.0).settings()
     assert pd["policy"] == "PDPolicy" and pd["kp"] == 300.0 and pd["kd"] > 0
     env.close()
+
+
+def test_footholds_away_from_step_down_risers_walk_a_long_legged_robot():
+    """Validation course 1,000,015 (rough ground, difficulty 1, every parameter 10 % off: legs
+    10 % long): the defaults plan the second foothold about 3 cm before the step down at x =
+    0.30 m; the foot lands beyond the riser and swings back into its face (a trip within the
+    first second). With ``drop_edge_margin`` such footholds rank last: the same policy walks the
+    whole course."""
+    env = gym.make(
+        "roughwalk/CompassGaitRough-v0",
+        difficulty=1.0,
+        robot_error={"all": 0.1, "draw": "sign"},
+    )
+    info, _ = episode(env, make_reference_policy(env), 1_000_015)
+    assert info["failure"] == "trip" and info["footsteps"] == 1 and info["time"] < 1.0
+    assert abs(info["stance_foot"][0] - 0.16) < 0.01  # the first foothold, on the flat run-up
+    policy = make_reference_policy(env, planner={"drop_edge_margin": 0.03})
+    info, _ = episode(env, policy, 1_000_015)
+    assert info["failure"] is None and info["time"] == pytest.approx(15.0)
+    assert info["footsteps"] >= 18, info["footsteps"]

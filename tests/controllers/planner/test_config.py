@@ -23,6 +23,8 @@ def test_bad_config_raises():
         PlannerConfig(gauss_newton_scaling=0.5)
     with pytest.raises(ValueError, match=r"speed_reserve = -0.1; allowed: >= 0"):
         PlannerConfig(speed_reserve=-0.1)
+    with pytest.raises(ValueError, match=r"drop_edge_margin = -0.01; allowed: >= 0"):
+        PlannerConfig(drop_edge_margin=-0.01)
     for bad in (-0.1, 1.0):
         with pytest.raises(ValueError, match=rf"dip_floor = {bad}; allowed: \[0, 1\)"):
             PlannerConfig(dip_floor=bad)

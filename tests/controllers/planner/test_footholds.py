@@ -82,6 +82,35 @@ def test_ranking_by_touchdown_angle():
     assert np.all(np.diff(score) >= -1e-12)
 
 
+def test_footholds_near_a_step_down_riser_rank_after_the_others():
+    """``drop_edge_margin``: the same admissible footholds; those closer than ``edge_margin +
+    drop_edge_margin`` to a step-down riser (ahead of them or behind them) rank after every
+    other one, each group in the order without it; 0 changes nothing."""
+    tmap = TerrainMap(Terrain.stairs([0.30], [-0.005]))  # a 5 mm step down at x = 0.30
+    stance = (0.14, 0.0)
+    plain = PlannerConfig.for_robot("paper").rules()
+    rules = PlannerConfig.for_robot("paper", drop_edge_margin=0.03).rules()
+    ref, _, _ = candidate_footholds(tmap, stance, plain, 0.32)
+    cx, cy, _ = candidate_footholds(tmap, stance, rules, 0.32)
+    np.testing.assert_array_equal(np.sort(cx), np.sort(ref))
+    near = np.abs(cx - 0.30) < rules.edge_margin + 0.03
+    assert near.any() and (cx[near] < 0.30).any() and (cx[near] > 0.30).any()
+    k = int(np.argmax(near))
+    assert not near[:k].any() and near[k:].all()  # the near ones last
+    clear = ref[np.abs(ref - 0.30) >= rules.edge_margin + 0.03]
+    np.testing.assert_array_equal(cx[:k], clear)
+    np.testing.assert_array_equal(cx[k:], ref[np.abs(ref - 0.30) < rules.edge_margin + 0.03])
+    assert ref[0] in cx[k:]  # the best foothold without it is near the riser
+    off = PlannerConfig.for_robot("paper", drop_edge_margin=0.0).rules()
+    np.testing.assert_array_equal(candidate_footholds(tmap, stance, off, 0.32)[0], ref)
+    # a step up is no such riser
+    up = TerrainMap(Terrain.stairs([0.30], [0.005]))
+    np.testing.assert_array_equal(
+        candidate_footholds(up, stance, rules, 0.32)[0],
+        candidate_footholds(up, stance, plain, 0.32)[0],
+    )
+
+
 def test_no_foothold_says_why():
     rules = PlannerConfig.for_robot("paper").rules()
     wall = TerrainMap(Terrain.stairs([0.05], [0.5]))
