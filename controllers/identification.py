@@ -16,30 +16,29 @@ p2, p3, p4, p5, Fc, Fv)`` is identified in the nominal input's scale. Every robo
 better than the dynamics (a free ``p2`` absorbs a push instead).
 
 :class:`SwingIdentifier` fits ``theta`` by **output error with multiple shooting**: each stance is
-cut into segments of about 0.15 s; each segment is simulated from its own initial state (fitted
-too) under the inputs that were applied, and the simulated angles are compared with the measured
-ones (a Huber loss; a segment that the fitted model still cannot explain, a push say, is then left
-out and the fit repeated). Short segments see the ratio of ``p3`` and ``p5`` (the stance leg's
-inertia and gravity) but barely their level, which decides how much speed a step loses before its
-apex: a +-10 % robot moves ``p5`` by up to 98 %, and fits on segments of 0.15 s alone missed it by
-40 % (rms, on validation stairs courses). So every stance is also cut into segments of 0.3 s
-(``long_segment``), and the fit on those is used where each of them is explained to
-:data:`EXPLAINED_RMS` standard deviations; a push within a long segment leaves it unexplained, and
-the fit on the short segments (which a push costs one segment) is used instead. A small push (0.05
-m/s at the hip) leaves a long segment explained, and the long fit can take the push for a robot
-with other ``p3`` and ``p5``; so the long fit only refines a model the short segments' fit already
-rejects (model error makes it significant, a push on a nominal robot seldom does). The default
-(:data:`DEFAULT_LONG_SEGMENT`); 0 turns it off. The solver is an iteratively reweighted
-Levenberg-Marquardt on the Huber cost: a segment's residuals depend on the coefficients and its own
-initial state only, so each iteration eliminates the segments' 4 x 4 blocks (a Schur complement)
-and costs in proportion to the number of segments, where a dense solver's cost grows with its
-cube; the coefficients' covariance is the inverse of the same Schur complement at the solution.
-Equation-error fits (regressing on
+cut into segments of about 0.15 s; each segment is simulated from its own initial state (fitted too)
+under the inputs that were applied, and the simulated angles are compared with the measured ones (a
+Huber loss; a segment that the fitted model still cannot explain, a push say, is then left out and
+the fit repeated). Short segments see the ratio of ``p3`` and ``p5`` (the stance leg's inertia and
+gravity) but barely their level, which decides how much speed a step loses before its apex: a +-10 %
+robot moves ``p5`` by up to 98 %, and fits on segments of 0.15 s alone missed it by 40 % (rms, on
+validation stairs courses). So every stance is also cut into segments of 0.3 s (``long_segment``),
+and the fit on those is used where each of them is explained to :data:`EXPLAINED_RMS` standard
+deviations; a push within a long segment leaves it unexplained, and the fit on the short segments
+(which a push costs one segment) is used instead. A small push (0.05 m/s at the hip) leaves a long
+segment explained, and the long fit can take the push for a robot with other ``p3`` and ``p5``; so
+the long fit only refines a model the short segments' fit already rejects (model error makes it
+significant, a push on a nominal robot seldom does). The default (:data:`DEFAULT_LONG_SEGMENT`); 0
+turns it off. The solver is an iteratively reweighted Levenberg-Marquardt on the Huber cost: a
+segment's residuals depend on the coefficients and its own initial state only, so each iteration
+eliminates the segments' 4 x 4 blocks (a Schur complement) and costs in proportion to the number of
+segments, where a dense solver's cost grows with its cube; the coefficients' covariance is the
+inverse of the same Schur complement at the solution. Equation-error fits (regressing on
 differentiated encoder readings) are biased here: the unactuated row of the dynamics is homogeneous
 in ``theta``, and noise in the differentiated angles pulls ``p3`` and ``p4 + p5`` to zero together.
 Output error puts the noise where it is, on the measured angles. A Gaussian prior centred on the
-nominal coefficients (:data:`PRIOR`) keeps the directions the data barely see (the absolute level
-of ``p3`` and ``p5`` when only their ratio is excited) near the nominal robot.
+nominal coefficients (:data:`PRIOR`) keeps the directions the data barely see (the absolute level of
+``p3`` and ``p5`` when only their ratio is excited) near the nominal robot.
 
 :func:`robot_from_coefficients` turns the identified coefficients into the nearest robot
 (smallest relative change of ``m, mH, mHg, Ic, lc``) with a given leg length: the leg length is

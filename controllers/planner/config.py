@@ -75,12 +75,12 @@ class PlannerConfig:
             longer or shorter than the model's, a foot estimated off) otherwise passes such a
             riser and swings back into its face. 0 (default): off.
         relaxed_margin: the fraction of ``drop_margin``, ``rise_margin`` and
-            ``drop_edge_margin`` a step keeps where
-            the full margins leave its stance foot no admissible foothold, in [0, 1] (1: no
-            relaxation). On stairs the admissible footholds form windows; a foot that landed
-            between two (a model error, a push) would otherwise have no step at all. The step's
-            constraints still check the swing foot's clearance over the riser, and footholds
-            are still ranked by the chains the full margins leave open.
+            ``drop_edge_margin`` a step keeps where the full margins leave its stance foot no
+            admissible foothold, in [0, 1] (1: no relaxation). On stairs the admissible
+            footholds form windows; a foot that landed between two (a model error, a push)
+            would otherwise have no step at all. The step's constraints still check the swing
+            foot's clearance over the riser, and footholds are still ranked by the chains the
+            full margins leave open.
         q1_min, q1_max: inter-leg angle at touchdown bounds [rad].
         max_rise, max_drop: largest height gain / loss in one step [m].
         duration_min, duration_max: step duration bounds [s] (Assumption 1).
@@ -268,10 +268,9 @@ class PlannerConfig:
                 raise ValueError(f"PlannerConfig.{name} = {getattr(self, name)!r}; allowed: > 0")
         nonneg = (
             "edge_margin drop_margin rise_margin drop_edge_margin relaxed_margin max_rise max_drop "
-            "clearance "
-            "lookahead_rise arm_clearance retracted_clearance face_clearance touchdown_slope "
-            "gait_min_thetadot speed_reserve end_thetadot_floor w_speed w_end w_shape w_torque "
-            "w_slope time_budget"
+            "clearance lookahead_rise arm_clearance retracted_clearance face_clearance "
+            "touchdown_slope gait_min_thetadot speed_reserve end_thetadot_floor w_speed w_end "
+            "w_shape w_torque w_slope time_budget"
         ).split()
         for name in nonneg:
             if not getattr(self, name) >= 0:
