@@ -445,6 +445,7 @@ def make_eval_env(
     leg_margin: float | None = None,
     foot_estimate: str | None = None,
     long_segment: float | None = None,
+    drop_edge_sd: float | None = None,
 ) -> tuple[gym.Env, Policy, str, dict[str, Any]]:
     """The env (with the agent's wrappers) and the policy for ``policy_spec``.
 
@@ -483,6 +484,10 @@ def make_eval_env(
             long shooting segments [s] (in [0, 1]; 0: short segments only, the fits before
             this default; None: the policy's default, 0.3; see
             :class:`controllers.ReferencePolicy`).
+        drop_edge_sd: for the ``pd`` and ``reference`` baselines, footholds near a step-down
+            riser ranked last within this many standard deviations of the leg-length
+            uncertainty (in [0, 10]; None: the policy's default, 0, off; see
+            :class:`controllers.ReferencePolicy`).
 
     Returns:
         ``(env, policy, env_id, env_kwargs)``, with the env id and keyword arguments used.
@@ -497,6 +502,7 @@ def make_eval_env(
         "leg_margin": leg_margin,
         "foot_estimate": foot_estimate,
         "long_segment": long_segment,
+        "drop_edge_sd": drop_edge_sd,
     }
     for name, value in settings.items():
         if value is not None and policy_spec not in CONTROLLED_BASELINES:
@@ -531,6 +537,8 @@ def make_eval_env(
         options["foot_estimate"] = foot_estimate
     if long_segment is not None:
         options["long_segment"] = long_segment
+    if drop_edge_sd is not None:
+        options["drop_edge_sd"] = drop_edge_sd
     trained = None
     if policy_spec not in BASELINES:
         trained = load_trained(policy_spec, vecnormalize=vecnormalize, algo=algo)
@@ -603,6 +611,7 @@ def evaluate(
     leg_margin: float | None = None,
     foot_estimate: str | None = None,
     long_segment: float | None = None,
+    drop_edge_sd: float | None = None,
 ) -> Evaluation:
     """Evaluate a baseline (``passive``, ``pd``, ``reference``) or a trained model (path).
 
@@ -616,11 +625,12 @@ def evaluate(
         progress: show a progress bar.
         algo: a trained model's algorithm (default: from its run or the file).
         controller_mode, plan_steps, perception, planner, controller, observer_eps, identify,
-        leg_margin, foot_estimate, long_segment: the ``pd`` and ``reference`` baselines'
-            controller mode, fixed-plan length, perception, planner and controller settings,
-            observer time constant, online identification, foothold margins from the
-            leg-length uncertainty, the localisation's point estimate and the identification's
-            long segments (see :func:`make_eval_env`).
+        leg_margin, foot_estimate, long_segment, drop_edge_sd: the ``pd`` and ``reference``
+            baselines' controller mode, fixed-plan length, perception, planner and controller
+            settings, observer time constant, online identification, foothold margins from
+            the leg-length uncertainty, the localisation's point estimate, the
+            identification's long segments and the drop-edge preference from the leg-length
+            uncertainty (see :func:`make_eval_env`).
     """
     seeds = eval_seeds(seed, episodes)
     env, policy, env_id, env_kwargs = make_eval_env(
@@ -639,6 +649,7 @@ def evaluate(
         leg_margin,
         foot_estimate,
         long_segment,
+        drop_edge_sd,
     )
     mass, g, _ = _robot(env)
     iterator: Any = seeds

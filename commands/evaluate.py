@@ -293,6 +293,14 @@ def configure(parser: argparse.ArgumentParser) -> None:
         "Z standard deviations of the leg-length uncertainty (the localiser's; default 0, off)",
     )
     parser.add_argument(
+        "--drop-edge-sd",
+        type=float_range(0.0, MAX_LEG_MARGIN),
+        metavar="Z",
+        help=f"the {' and '.join(CONTROLLED_BASELINES)} policies rank footholds near a "
+        "step-down riser last while the leg length is uncertain: within Z standard deviations "
+        "of where a step lands, at most 3 cm (default 0, off)",
+    )
+    parser.add_argument(
         "--foot-estimate",
         choices=ESTIMATES,
         help=f"the {' and '.join(CONTROLLED_BASELINES)} policies correct the stance foot to this "
@@ -394,6 +402,7 @@ def run(args: argparse.Namespace) -> int:
             observer_eps=args.observer_eps,
             identify=args.identify,
             leg_margin=args.leg_margin,
+            drop_edge_sd=args.drop_edge_sd,
             foot_estimate=args.foot_estimate,
             long_segment=args.long_segment,
         )

@@ -421,6 +421,7 @@ class TransverseController:
         self._configured = self.planner  # the planner before adjust_planner's changes
         self._adjustment: tuple = ()
         self._extra_margin = 0.0  # widen_margins
+        self._extra_drop_edge = 0.0
         self.records: list[StepRecord] = []
         self.plan: Plan | None = None
         self.solution: HorizonSolution | None = None
@@ -470,20 +471,23 @@ class TransverseController:
         and :meth:`widen_margins`' changes."""
         return self._configured
 
-    def widen_margins(self, extra: float) -> None:
+    def widen_margins(self, extra: float, drop_edge: float = 0.0) -> None:
         """Keep footholds ``extra`` [m] further from faces and kinks than the configured
         ``PlannerConfig.edge_margin`` from the next planning call on (where a foot lands is
-        uncertain: a leg length not yet measured, say), on top of :meth:`adjust_planner`'s
-        changes; 0: the configured margin.
+        uncertain: a leg length not yet measured, say), and rank those within ``drop_edge``
+        [m] of a step-down riser's margin last (``PlannerConfig.drop_edge_margin``, where
+        that is smaller), on top of :meth:`adjust_planner`'s changes; 0: the configured
+        margins.
 
         Raises:
-            ValueError: ``extra`` negative or not finite.
+            ValueError: ``extra`` or ``drop_edge`` negative or not finite.
         """
-        extra = float(extra)
-        if not (math.isfinite(extra) and extra >= 0):
-            raise ValueError(f"extra margin = {extra!r}; allowed: >= 0 m")
-        if extra != self._extra_margin:
-            self._extra_margin = extra
+        extra, drop_edge = float(extra), float(drop_edge)
+        for name, value in (("extra margin", extra), ("drop_edge", drop_edge)):
+            if not (math.isfinite(value) and value >= 0):
+                raise ValueError(f"{name} = {value!r}; allowed: >= 0 m")
+        if (extra, drop_edge) != (self._extra_margin, self._extra_drop_edge):
+            self._extra_margin, self._extra_drop_edge = extra, drop_edge
             self._use_adjustment(self._adjustment)
 
     def _use_adjustment(self, adjustment: tuple) -> None:
@@ -495,6 +499,9 @@ class TransverseController:
         if self._extra_margin > 0:
             margin = changes.get("edge_margin", base.config.edge_margin)
             changes["edge_margin"] = margin + self._extra_margin
+        drop_edge = changes.get("drop_edge_margin", base.config.drop_edge_margin)
+        if self._extra_drop_edge > drop_edge:
+            changes["drop_edge_margin"] = self._extra_drop_edge
         self.planner = base.relaxed(**changes) if changes else base
         self._adjustment = adjustment
         self._relaxed.clear()  # the degradations' planners derive from this one

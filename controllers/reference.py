@@ -60,8 +60,11 @@ DRIFT_Z = 1.5
 MODEL_CHANGE = 0.01
 #: the leg-length margin's widening is rounded to this [m] (a new planner whenever it changes)
 MARGIN_QUANTUM = 0.0025
-#: the largest leg_margin [standard deviations]
+#: the largest leg_margin and drop_edge_sd [standard deviations]
 MAX_LEG_MARGIN = 10.0
+#: drop_edge_sd's largest preference margin [m]: about the 2-3 cm by which a foot lands off its
+#: plan on a leg 10 % longer or shorter than the model's, before the scans have measured it
+DROP_EDGE_CAP = 0.03
 #: options of :meth:`ReferencePolicy.settings` added after trained runs began recording their
 #: base (``agents.policies.base_settings``), each with the value that does what the policy did
 #: before it existed (nested as in the settings: a planner field under ``"planner"``): a base
@@ -69,8 +72,26 @@ MAX_LEG_MARGIN = 10.0
 ADDED_SETTINGS: dict[str, Any] = {
     "foot_estimate": "mean",
     "long_segment": 0.0,
+    "drop_edge_sd": 0.0,
     "planner": {"speed_reserve": 0.0, "dip_floor": 0.0, "drop_edge_margin": 0.0},
 }
+
+
+def checked_deviations(name: str, value: Any, localiser: Any) -> float:
+    """A margin in standard deviations of the leg-length uncertainty (:class:`ReferencePolicy`'s
+    ``leg_margin`` and ``drop_edge_sd``): a number in [0, :data:`MAX_LEG_MARGIN`], and above 0
+    only with a localiser; anything else raises ``ValueError`` naming it and the range."""
+    allowed = f"allowed: a number in [0, {MAX_LEG_MARGIN}] (standard deviations)"
+    if isinstance(value, bool) or not isinstance(value, (int, float, np.number)):
+        raise ValueError(f"{name} = {value!r}; {allowed}")
+    if not (math.isfinite(value) and 0 <= value <= MAX_LEG_MARGIN):
+        raise ValueError(f"{name} = {value!r}; {allowed}")
+    if value and localiser is None:
+        raise ValueError(
+            f"{name}: needs the terrain-scan localisation (localise on, a scanner), which "
+            "measures the leg length"
+        )
+    return float(value)
 
 
 def checked_long_segment(value: Any) -> float:
@@ -136,6 +157,15 @@ class ReferencePolicy:
             to :data:`MARGIN_QUANTUM`; wide at the first footsteps, before the scans measure
             the leg, and about nothing once they have. Needs ``localise``; 0 (default): off.
             [standard deviations], in [0, :data:`MAX_LEG_MARGIN`].
+        drop_edge_sd: footholds near a step-down riser ranked last while the leg length is
+            uncertain: at every touchdown the planner's ``drop_edge_margin`` becomes
+            ``drop_edge_sd`` standard deviations of where a step of ``step_length`` lands
+            (as for ``leg_margin``), rounded to :data:`MARGIN_QUANTUM`, at most
+            :data:`DROP_EDGE_CAP` (the configured margin where that is larger). A foot that
+            lands off its plan otherwise passes such a riser and swings back into its face;
+            once the scans have measured the leg the footholds are the configured planner's
+            again. Needs ``localise``; 0 (default): off. [standard deviations], in [0,
+            :data:`MAX_LEG_MARGIN`].
         controller_kwargs: passed to the controller class (``kp``, ``kd`` for :class:`PDPolicy`).
     """
 
@@ -157,6 +187,7 @@ class ReferencePolicy:
         identify: int = DEFAULT_IDENTIFY,
         long_segment: float = DEFAULT_LONG_SEGMENT,
         leg_margin: float = 0.0,
+        drop_edge_sd: float = 0.0,
         **controller_kwargs: Any,
     ):
         est = self.estimator = SensorStateEstimator(
@@ -170,17 +201,8 @@ class ReferencePolicy:
             raise ValueError(f"identify = {identify!r}; allowed: an integer >= 0 (footsteps)")
         self.identify = int(identify)
         self.long_segment = checked_long_segment(long_segment)
-        allowed = f"allowed: a number in [0, {MAX_LEG_MARGIN}] (standard deviations)"
-        if isinstance(leg_margin, bool) or not isinstance(leg_margin, (int, float, np.number)):
-            raise ValueError(f"leg_margin = {leg_margin!r}; {allowed}")
-        if not (math.isfinite(leg_margin) and 0 <= leg_margin <= MAX_LEG_MARGIN):
-            raise ValueError(f"leg_margin = {leg_margin!r}; {allowed}")
-        if leg_margin and est.localiser is None:
-            raise ValueError(
-                "leg_margin: needs the terrain-scan localisation (localise on, a scanner), which "
-                "measures the leg length"
-            )
-        self.leg_margin = float(leg_margin)
+        self.leg_margin = checked_deviations("leg_margin", leg_margin, est.localiser)
+        self.drop_edge_sd = checked_deviations("drop_edge_sd", drop_edge_sd, est.localiser)
         self.odometry_error = float(odometry_error)
         self.identifier: SwingIdentifier | None = None
         if self.identify:
@@ -213,6 +235,7 @@ class ReferencePolicy:
             "identify": self.identify,
             "long_segment": self.long_segment,
             "leg_margin": self.leg_margin,
+            "drop_edge_sd": self.drop_edge_sd,
             "settle_time": self.settle_time,
         }
         for gain in ("kp", "kd"):  # the PD controller's
@@ -347,12 +370,18 @@ class ReferencePolicy:
     def _widen_margins(self) -> None:
         """Widen the planner's foothold margins by :attr:`leg_margin` standard deviations of
         where a step of the configured length lands from the leg-length uncertainty (the
-        localiser's drift-rate belief), in steps of :data:`MARGIN_QUANTUM`."""
+        localiser's drift-rate belief), and its drop-edge preference to :attr:`drop_edge_sd`
+        of them (at most :data:`DROP_EDGE_CAP`), in steps of :data:`MARGIN_QUANTUM`."""
         loc = self.estimator.localiser
-        if not self.leg_margin or loc is None:
+        if not (self.leg_margin or self.drop_edge_sd) or loc is None:
             return
-        sd = self.leg_margin * self.controller.configured_planner.config.step_length * loc.drift_sd
-        self.controller.widen_margins(MARGIN_QUANTUM * math.floor(sd / MARGIN_QUANTUM + 0.5))
+        sd = self.controller.configured_planner.config.step_length * loc.drift_sd
+
+        def quantised(z: float) -> float:
+            return MARGIN_QUANTUM * math.floor(z * sd / MARGIN_QUANTUM + 0.5)
+
+        drop_edge = min(DROP_EDGE_CAP, quantised(self.drop_edge_sd))
+        self.controller.widen_margins(quantised(self.leg_margin), drop_edge)
 
     def _identify(self) -> None:
         """A stance ended: fit the swing dynamics to the stances so far and switch the model

@@ -236,8 +236,9 @@ def test_planner_controller_and_observer_options_reach_the_reference_policy():
         identify=2,
         leg_margin=2.5,
         foot_estimate="selected",
+        drop_edge_sd=6.0,
     )
-    assert policy.identify == 2 and policy.leg_margin == 2.5
+    assert policy.identify == 2 and policy.leg_margin == 2.5 and policy.drop_edge_sd == 6.0
     assert policy.estimator.localiser.estimate == "selected"
     assert policy.settings()["foot_estimate"] == "selected"
     ctrl = policy.controller
@@ -278,6 +279,8 @@ def test_planner_controller_and_observer_options_reach_the_reference_policy():
         ("passive", {"foot_estimate": "mean"}, r"foot_estimate: applies to the pd and"),
         ("reference", {"long_segment": -0.1}, r"long_segment = -0.1; allowed: a number in \[0, 1"),
         ("passive", {"long_segment": 0.0}, r"long_segment: applies to the pd and reference"),
+        ("reference", {"drop_edge_sd": 12}, r"drop_edge_sd = 12; allowed: a number in \[0, 10"),
+        ("passive", {"drop_edge_sd": 1.0}, r"drop_edge_sd: applies to the pd and reference"),
         (
             "reference",
             {"foot_estimate": "selected", "perception": "known-map"},

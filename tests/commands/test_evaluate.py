@@ -232,6 +232,8 @@ def test_controller_settings_from_the_command_line(tmp_path: Path, capsys, episo
         (["--policy", "passive", "--leg-margin", "1"], "leg_margin: applies to the pd and"),
         (["--policy", "reference", "--long-segment", "2"], "--long-segment: must be"),
         (["--policy", "passive", "--long-segment", "0"], "long_segment: applies to the pd and"),
+        (["--policy", "reference", "--drop-edge-sd", "-1"], "--drop-edge-sd: must be"),
+        (["--policy", "passive", "--drop-edge-sd", "1"], "drop_edge_sd: applies to the pd and"),
     ]
     for extra, message in bad:
         assert main([*argv, *extra]) == 2

@@ -6,6 +6,7 @@ import pytest
 
 import envs  # noqa: F401  (registers the ids)
 from controllers import PDPolicy, make_reference_policy
+from controllers.reference import DROP_EDGE_CAP
 
 COURSE_END = 1.1  # hip distance [m]: past both stairs and three or more steps on the flat
 
@@ -148,6 +149,40 @@ def test_leg_margin_is_wide_until_the_scans_measure_the_leg():
             make_reference_policy(env, leg_margin=bad)
     with pytest.raises(ValueError, match="leg_margin: needs the terrain-scan localisation"):
         make_reference_policy(env, leg_margin=3.0, localise=False)
+
+
+def test_drop_edge_sd_ranks_footholds_by_drop_risers_last_until_the_scans_measure_the_leg():
+    """``drop_edge_sd``: the first plans rank footholds within 3 cm (the cap; 9 sd of 0.15 m x
+    3.5 % is more) of a step-down riser's margin last, later ones within what the scans leave
+    uncertain; validation course 1,000,015 (legs 10 % long), which the configured planner trips
+    on at its second footstep (the foot lands past the run-up's step down and swings back into
+    its face), is walked; out of range is an error naming the option."""
+    env = gym.make(
+        "roughwalk/CompassGaitRough-v0", difficulty=1.0, robot_error={"all": 0.1, "draw": "sign"}
+    )
+    policy = make_reference_policy(env, drop_edge_sd=9.0)
+    assert policy.settings()["drop_edge_sd"] == 9.0
+    obs, _ = env.reset(seed=1_000_015)
+    policy.reset()
+    seen = []
+    while True:
+        obs, _, terminated, truncated, info = env.step(policy(obs))
+        if len(policy.controller.records) > len(seen):
+            seen.append(policy.controller.planner.config.drop_edge_margin)
+        if terminated or truncated:
+            break
+    assert info["failure"] is None and info["footsteps"] >= 18, info
+    margins = np.array(seen)
+    assert margins[0] == pytest.approx(DROP_EDGE_CAP)
+    assert margins[4:].max() < DROP_EDGE_CAP  # the scans narrow it
+    assert margins[-1] <= 0.005 + 1e-12
+    # the configured planner is untouched: the widening is the policy's
+    assert policy.controller.configured_planner.config.drop_edge_margin == 0.0
+    for bad in (-1.0, 11.0, float("nan"), "wide", True):
+        with pytest.raises(ValueError, match="drop_edge_sd = .*; allowed: a number in"):
+            make_reference_policy(env, drop_edge_sd=bad)
+    with pytest.raises(ValueError, match="drop_edge_sd: needs the terrain-scan localisation"):
+        make_reference_policy(env, drop_edge_sd=3.0, localise=False)
 
 
 def test_bad_observations_and_modes_raise():
