@@ -474,10 +474,10 @@ class TransverseController:
     def widen_margins(self, extra: float, drop_edge: float = 0.0) -> None:
         """Keep footholds ``extra`` [m] further from faces and kinks than the configured
         ``PlannerConfig.edge_margin`` from the next planning call on (where a foot lands is
-        uncertain: a leg length not yet measured, say), and rank those within ``drop_edge``
-        [m] of a step-down riser's margin last (``PlannerConfig.drop_edge_margin``, where
-        that is smaller), on top of :meth:`adjust_planner`'s changes; 0: the configured
-        margins.
+        uncertain: a leg length not yet measured, say), and rank footholds closer than
+        ``edge_margin + drop_edge`` [m] to a step-down riser last (``drop_edge`` in place of
+        ``PlannerConfig.drop_edge_margin`` where that is smaller), on top of
+        :meth:`adjust_planner`'s changes; 0: the configured margins.
 
         Raises:
             ValueError: ``extra`` or ``drop_edge`` negative or not finite.

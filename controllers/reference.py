@@ -163,8 +163,8 @@ class ReferencePolicy:
             (as for ``leg_margin``), rounded to :data:`MARGIN_QUANTUM`, at most
             :data:`DROP_EDGE_CAP` (the configured margin where that is larger). A foot that
             lands off its plan otherwise passes such a riser and swings back into its face;
-            once the scans have measured the leg the footholds are the configured planner's
-            again. Needs ``localise``; 0 (default): off. [standard deviations], in [0,
+            once the scans have measured the leg the margin is a few millimetres. Needs
+            ``localise``; 0 (default): off. [standard deviations], in [0,
             :data:`MAX_LEG_MARGIN`].
         controller_kwargs: passed to the controller class (``kp``, ``kd`` for :class:`PDPolicy`).
     """
