@@ -46,7 +46,7 @@ from scipy import stats
 import envs  # noqa: F401  (registers the ids)
 from controllers.controller import ControllerConfig
 from controllers.planner import PlannerConfig
-from controllers.reference import checked_long_segment
+from controllers.reference import checked_deviations, checked_long_segment
 from envs.physics.terrain import MAX_COURSE_LENGTH, terrain_spec
 
 from .policies import BASELINES, make_baseline_policy
@@ -525,20 +525,25 @@ def policy_options(
     controller: dict[str, Any] | None,
     planner: dict[str, Any] | None = None,
     long_segment: float | None = None,
+    drop_edge_sd: float | None = None,
 ) -> dict[str, Any]:
     """Keyword arguments of :func:`agents.policies.make_baseline_policy` for ``policy`` with the
     controller settings ``controller`` (:class:`controllers.ControllerConfig` fields), the
     gait-planner settings ``planner`` (:class:`controllers.PlannerConfig` fields; None or
-    empty: none) and the online identification's ``long_segment`` [s] (None: the policy's
-    default; see :class:`controllers.ReferencePolicy`). Raises ``ValueError`` naming a bad
-    field, or settings for ``passive``."""
+    empty: none), the online identification's ``long_segment`` [s] and the drop-edge
+    preference from the leg-length uncertainty ``drop_edge_sd`` [standard deviations] (None:
+    the policy's default; see :class:`controllers.ReferencePolicy`). Raises ``ValueError``
+    naming a bad field, or settings for ``passive``."""
     out: dict[str, Any] = {}
-    if long_segment is not None:
+    for name, value, checked in (
+        ("long_segment", long_segment, checked_long_segment),
+        ("drop_edge_sd", drop_edge_sd, lambda v: checked_deviations("drop_edge_sd", v)),
+    ):
+        if value is None:
+            continue
         if policy == "passive":
-            raise ValueError(
-                "long_segment: applies to the pd and reference policies, not to passive"
-            )
-        out["long_segment"] = checked_long_segment(long_segment)
+            raise ValueError(f"{name}: applies to the pd and reference policies, not to passive")
+        out[name] = checked(value)
     for name, value, cls, key in (
         ("controller", controller, ControllerConfig, "config"),
         ("planner", planner, PlannerConfig, "planner"),
@@ -569,6 +574,7 @@ def run_walks(
     controller: dict[str, Any] | None = None,
     planner: dict[str, Any] | None = None,
     long_segment: float | None = None,
+    drop_edge_sd: float | None = None,
 ) -> list[Walk]:
     """Walk ``policy`` on courses of random blocks of ``roughness`` until each walk fails or
     is censored, ``walkers`` walks at a time on one native vector env.
@@ -596,12 +602,14 @@ def run_walks(
             robot's defaults).
         long_segment: their online identification's long shooting segments [s] (None: the
             policy's default; 0: short segments only).
+        drop_edge_sd: their drop-edge preference from the leg-length uncertainty [standard
+            deviations] (None: the policy's default, 0, off).
 
     Returns:
         The walks in walk order.
     """
     check_run_args(policy, walks, walkers, step_cap, seed, max_step_time)
-    policy_kwargs = policy_options(policy, controller, planner, long_segment)
+    policy_kwargs = policy_options(policy, controller, planner, long_segment, drop_edge_sd)
     r = _nonneg("roughness", roughness, 1.0)
     probe = gym.make(env_id)
     robot, dt = probe.unwrapped.robot, float(probe.unwrapped.dt)

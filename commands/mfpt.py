@@ -56,6 +56,7 @@ from commands.cli import (
     key_value,
     output_dir,
 )
+from controllers.reference import MAX_LEG_MARGIN
 
 OUTPUTS = ("mfpt.json", "mfpt.csv", "mfpt.png", "mfpt_survival.png")
 CSV_COLUMNS = (
@@ -143,6 +144,14 @@ def configure(parser: argparse.ArgumentParser) -> None:
         help="the pd and reference policies' identification also fits segments of S seconds, "
         "used where none shows a push and the data reject the nominal model (default 0.3; 0: "
         "segments of 0.15 s only, the fits before this default)",
+    )
+    parser.add_argument(
+        "--drop-edge-sd",
+        type=float_range(0.0, MAX_LEG_MARGIN),
+        metavar="Z",
+        help="the pd and reference policies rank footholds near a step-down riser last while "
+        "the leg length is uncertain: within Z standard deviations of where a step lands, at "
+        "most 3 cm (default 0, off)",
     )
     parser.add_argument(
         "--out", type=output_dir, default=Path("results/mfpt"), help="folder of the results"
@@ -298,7 +307,8 @@ def run(args: argparse.Namespace) -> int:
     controller = dict(args.controller or ())
     planner = dict(args.planner or ())
     for policy in [p for p in policies if p != "passive"] or policies:
-        policy_options(policy, controller, planner, args.long_segment)  # a bad one stops here
+        # a bad one stops here
+        policy_options(policy, controller, planner, args.long_segment, args.drop_edge_sd)
     out: Path = args.out
     with claim_output_folder(out, OUTPUTS, args.overwrite):
         return _measure(args, out, levels, policies, controller, planner)
@@ -334,6 +344,7 @@ def _measure(
             controller=controller if policy != "passive" else None,
             planner=planner if policy != "passive" else None,
             long_segment=args.long_segment if policy != "passive" else None,
+            drop_edge_sd=args.drop_edge_sd if policy != "passive" else None,
         )
     leg = results[0].leg_length
     settings = {
@@ -347,6 +358,7 @@ def _measure(
         "controller": controller,
         "planner": planner,
         "long_segment": args.long_segment,
+        "drop_edge_sd": args.drop_edge_sd,
         "leg_length": leg,
         "mfpt": "1/p footsteps (the failing one counted); p = failures / footsteps attempted",
     }

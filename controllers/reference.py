@@ -77,20 +77,15 @@ ADDED_SETTINGS: dict[str, Any] = {
 }
 
 
-def checked_deviations(name: str, value: Any, localiser: Any) -> float:
+def checked_deviations(name: str, value: Any) -> float:
     """A margin in standard deviations of the leg-length uncertainty (:class:`ReferencePolicy`'s
-    ``leg_margin`` and ``drop_edge_sd``): a number in [0, :data:`MAX_LEG_MARGIN`], and above 0
-    only with a localiser; anything else raises ``ValueError`` naming it and the range."""
+    ``leg_margin`` and ``drop_edge_sd``): a number in [0, :data:`MAX_LEG_MARGIN`]; anything else
+    raises ``ValueError`` naming it and the range."""
     allowed = f"allowed: a number in [0, {MAX_LEG_MARGIN}] (standard deviations)"
     if isinstance(value, bool) or not isinstance(value, (int, float, np.number)):
         raise ValueError(f"{name} = {value!r}; {allowed}")
     if not (math.isfinite(value) and 0 <= value <= MAX_LEG_MARGIN):
         raise ValueError(f"{name} = {value!r}; {allowed}")
-    if value and localiser is None:
-        raise ValueError(
-            f"{name}: needs the terrain-scan localisation (localise on, a scanner), which "
-            "measures the leg length"
-        )
     return float(value)
 
 
@@ -201,8 +196,14 @@ class ReferencePolicy:
             raise ValueError(f"identify = {identify!r}; allowed: an integer >= 0 (footsteps)")
         self.identify = int(identify)
         self.long_segment = checked_long_segment(long_segment)
-        self.leg_margin = checked_deviations("leg_margin", leg_margin, est.localiser)
-        self.drop_edge_sd = checked_deviations("drop_edge_sd", drop_edge_sd, est.localiser)
+        self.leg_margin = checked_deviations("leg_margin", leg_margin)
+        self.drop_edge_sd = checked_deviations("drop_edge_sd", drop_edge_sd)
+        for name in ("leg_margin", "drop_edge_sd"):
+            if getattr(self, name) and est.localiser is None:
+                raise ValueError(
+                    f"{name}: needs the terrain-scan localisation (localise on, a scanner), "
+                    "which measures the leg length"
+                )
         self.odometry_error = float(odometry_error)
         self.identifier: SwingIdentifier | None = None
         if self.identify:

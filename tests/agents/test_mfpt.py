@@ -186,6 +186,21 @@ def test_the_identifications_long_segments_reach_the_policies():
     assert walks[0].footsteps == 2 and not walks[0].failed
 
 
+def test_the_drop_edge_preference_reaches_the_policies():
+    """``drop_edge_sd``: the pd and reference policies' footholds away from step-down risers
+    while the leg length is uncertain."""
+    assert policy_options("pd", None, None, None, 9.0) == {"drop_edge_sd": 9.0}
+    for policy, bad, match in (
+        ("passive", 9.0, "drop_edge_sd: applies to the pd and reference"),
+        ("reference", 11.0, r"drop_edge_sd = 11.0; allowed: a number in \[0, 10"),
+        ("pd", "wide", "drop_edge_sd = 'wide'"),
+    ):
+        with pytest.raises(ValueError, match=match):
+            policy_options(policy, None, None, None, bad)
+    walks = run_walks("reference", 0.01, 1, walkers=1, step_cap=2, drop_edge_sd=9.0)
+    assert walks[0].footsteps == 2 and not walks[0].failed
+
+
 @pytest.mark.parametrize(
     ("kwargs", "match"),
     [

@@ -94,6 +94,8 @@ def test_a_folder_another_command_holds_is_refused(tmp_path: Path, capsys, comma
         (["--policy", "passive", "--planner", "clearance=0.003"], "not to passive"),
         (["--long-segment", "1.5"], "--long-segment"),
         (["--policy", "passive", "--long-segment", "0"], "not to passive"),
+        (["--drop-edge-sd", "11"], "--drop-edge-sd"),
+        (["--policy", "passive", "--drop-edge-sd", "9"], "not to passive"),
     ],
 )
 def test_mfpt_bad_input_is_one_line_exit_2(tmp_path: Path, capsys, args, match):
@@ -139,6 +141,9 @@ def test_basin_and_mfpt_take_planner_settings(tmp_path: Path):
     assert main([*argv, "--step-cap", "2", "--long-segment", "0", "--out", str(out)]) == 0
     data = json.loads((out / "mfpt.json").read_text())
     assert data["settings"]["long_segment"] == 0.0
+    out = tmp_path / "m9"
+    assert main([*argv, "--step-cap", "2", "--drop-edge-sd", "9", "--out", str(out)]) == 0
+    assert json.loads((out / "mfpt.json").read_text())["settings"]["drop_edge_sd"] == 9.0
 
 
 def test_basin_writes_results(tmp_path: Path, capsys):
