@@ -152,11 +152,11 @@ def test_leg_margin_is_wide_until_the_scans_measure_the_leg():
 
 
 def test_drop_edge_sd_ranks_footholds_by_drop_risers_last_until_the_scans_measure_the_leg():
-    """``drop_edge_sd``: the first plans rank footholds within 3 cm (the cap; 9 sd of 0.15 m x
-    3.5 % is more) of a step-down riser's margin last, later ones within what the scans leave
-    uncertain; validation course 1,000,015 (legs 10 % long), which the configured planner trips
-    on at its second footstep (the foot lands past the run-up's step down and swings back into
-    its face), is walked; out of range is an error naming the option."""
+    """``drop_edge_sd``: the first plans rank footholds closer than ``edge_margin`` + 3 cm (the
+    cap; 9 sd of 0.15 m x 3.5 % is more) to a step-down riser last, later ones a margin as wide
+    as the scans leave the leg uncertain; validation course 1,000,015 (legs 10 % long), on which
+    the defaults trip at the second footstep (the test above), is walked; out of range is an
+    error naming the option."""
     env = gym.make(
         "roughwalk/CompassGaitRough-v0", difficulty=1.0, robot_error={"all": 0.1, "draw": "sign"}
     )
