@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import os
 from collections.abc import Callable, Sequence
+from pathlib import Path
 from typing import Any
 
 from agents.sweep.tasks import Task, run_task, run_task_list
@@ -75,6 +76,27 @@ def init_ray(workers: int | None = None, address: str | None = None) -> bool:
     return True
 
 
+def project_root() -> str:
+    """The folder this process imports the project's packages (``agents``, ``controllers``,
+    ``envs``) from."""
+    return str(Path(__file__).resolve().parents[2])
+
+
+def check_worker_root(theirs: str, ours: str | None = None) -> None:
+    """Raise ValueError where a local Ray instance's workers import the project from the folder
+    ``theirs`` and this process from another (``ours``, default :func:`project_root`): Ray
+    puts the folder a command runs in first on its workers' path, so a command run inside one
+    checkout with ``PYTHONPATH`` pointing at another would mix their code."""
+    ours = project_root() if ours is None else ours
+    if theirs != ours:
+        raise ValueError(
+            f"--backend ray: the Ray workers import the project from {theirs}, this process "
+            f"from {ours} (Ray puts the current folder first on its workers' path); run the "
+            "command from another folder, or from that one without PYTHONPATH, or with "
+            "--backend serial"
+        )
+
+
 #: how long a stopped run of calls waits for its cancelled Ray tasks to wind down (a training
 #: saves a checkpoint and marks its run interrupted) [s]
 CANCEL_GRACE = 120.0
@@ -92,9 +114,11 @@ def map_calls(
     each on a local instance or a cluster (``ray``, see :func:`init_ray`; an instance started
     here is shut down at the end).
 
-    If a call fails or the caller is interrupted (Ctrl-C), the Ray tasks still running are
-    cancelled with a ``KeyboardInterrupt`` inside them (what Ctrl-C does in the serial
-    backend), given :data:`CANCEL_GRACE` seconds to wind down, and the exception is raised.
+    On a local instance the workers must import the project from the folder this process
+    does (:func:`check_worker_root`). If a call fails or the caller is interrupted (Ctrl-C),
+    the Ray tasks still running are cancelled with a ``KeyboardInterrupt`` inside them (what
+    Ctrl-C does in the serial backend), given :data:`CANCEL_GRACE` seconds to wind down, and
+    the exception is raised.
 
     Args:
         fn: a module-level function (Ray pickles it by reference); on a cluster every node
@@ -122,6 +146,8 @@ def map_calls(
         return results
     started = init_ray(workers, address)
     try:
+        if address is None:  # a local instance: its workers run this machine's folders
+            check_worker_root(ray.get(ray.remote(num_cpus=1)(project_root).remote()))
         remote = ray.remote(num_cpus=1, max_retries=0)(fn)
         refs = [remote.remote(item) for item in items]
         index = {ref: i for i, ref in enumerate(refs)}

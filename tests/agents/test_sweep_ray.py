@@ -5,7 +5,7 @@ import pytest
 
 from agents.evaluate import evaluate
 from agents.sweep import read_records, run_sweep, spec_from_dict
-from agents.sweep.backends import map_calls
+from agents.sweep.backends import check_worker_root, map_calls, project_root
 from agents.sweep.store import EPISODES_FILE
 
 pytest.importorskip("ray")
@@ -33,6 +33,17 @@ def test_map_calls_raises_a_failed_call(local_ray, backend):
         map_calls(_square_or_fail, [1, -2, 3], backend)
     with pytest.raises(ValueError, match="--backend: unknown backend 'dask'"):
         map_calls(_square_or_fail, [1], "dask")
+
+
+def test_the_workers_must_import_the_code_this_process_runs(local_ray):
+    """A local instance's workers import the project from this process's folder (the tests run
+    from the checkout they import); another folder, as where a command runs inside one checkout
+    with PYTHONPATH pointing at another, is an error naming both before any task runs."""
+    theirs = local_ray.get(local_ray.remote(project_root).remote())
+    assert theirs == project_root()
+    check_worker_root(theirs)
+    with pytest.raises(ValueError, match="workers import the project from /elsewhere, this"):
+        check_worker_root("/elsewhere")
 
 
 def test_ray_and_serial_give_identical_records(local_ray, tmp_path):
