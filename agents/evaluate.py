@@ -486,8 +486,8 @@ def make_eval_env(
             :class:`controllers.ReferencePolicy`).
         drop_edge_sd: for the ``pd`` and ``reference`` baselines, footholds near a step-down
             riser ranked last within this many standard deviations of the leg-length
-            uncertainty (in [0, 10]; None: the policy's default, 0, off; see
-            :class:`controllers.ReferencePolicy`).
+            uncertainty (in [0, 10]; 0: off; None: the policy's default, 9 where it
+            localises; see :class:`controllers.ReferencePolicy`).
 
     Returns:
         ``(env, policy, env_id, env_kwargs)``, with the env id and keyword arguments used.

@@ -603,7 +603,7 @@ def run_walks(
         long_segment: their online identification's long shooting segments [s] (None: the
             policy's default; 0: short segments only).
         drop_edge_sd: their drop-edge preference from the leg-length uncertainty [standard
-            deviations] (None: the policy's default, 0, off).
+            deviations] (None: the policy's default, 9 where they localise; 0: off).
 
     Returns:
         The walks in walk order.

@@ -66,7 +66,7 @@ from commands.cli import (
 )
 from controllers.controller import MODES
 from controllers.localisation import ESTIMATES
-from controllers.reference import DROP_EDGE_CAP, MAX_LEG_MARGIN
+from controllers.reference import DEFAULT_DROP_EDGE_SD, DROP_EDGE_CAP, MAX_LEG_MARGIN
 
 ALGOS = ("ppo", "sac", "td3", "a2c")
 
@@ -298,7 +298,8 @@ def configure(parser: argparse.ArgumentParser) -> None:
         metavar="Z",
         help=f"the {' and '.join(CONTROLLED_BASELINES)} policies rank footholds near a "
         "step-down riser last while the leg length is uncertain: within Z standard deviations "
-        f"of where a step lands, at most {DROP_EDGE_CAP * 100:g} cm (default 0, off)",
+        f"of where a step lands, at most {DROP_EDGE_CAP * 100:g} cm; 0: off (default "
+        f"{DEFAULT_DROP_EDGE_SD:g} where the policy localises, else 0)",
     )
     parser.add_argument(
         "--foot-estimate",

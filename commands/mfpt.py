@@ -56,7 +56,7 @@ from commands.cli import (
     key_value,
     output_dir,
 )
-from controllers.reference import DROP_EDGE_CAP, MAX_LEG_MARGIN
+from controllers.reference import DEFAULT_DROP_EDGE_SD, DROP_EDGE_CAP, MAX_LEG_MARGIN
 
 OUTPUTS = ("mfpt.json", "mfpt.csv", "mfpt.png", "mfpt_survival.png")
 CSV_COLUMNS = (
@@ -151,7 +151,8 @@ def configure(parser: argparse.ArgumentParser) -> None:
         metavar="Z",
         help="the pd and reference policies rank footholds near a step-down riser last while "
         "the leg length is uncertain: within Z standard deviations of where a step lands, at "
-        f"most {DROP_EDGE_CAP * 100:g} cm (default 0, off)",
+        f"most {DROP_EDGE_CAP * 100:g} cm; 0: off (default {DEFAULT_DROP_EDGE_SD:g} where the "
+        "policy localises, else 0)",
     )
     parser.add_argument(
         "--out", type=output_dir, default=Path("results/mfpt"), help="folder of the results"

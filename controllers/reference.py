@@ -65,6 +65,9 @@ MAX_LEG_MARGIN = 10.0
 #: drop_edge_sd's largest preference margin [m]: about the 2-3 cm by which a foot lands off its
 #: plan on a leg 10 % longer or shorter than the model's, before the scans have measured it
 DROP_EDGE_CAP = 0.03
+#: drop_edge_sd where the policy localises [standard deviations] (without the localisation,
+#: which measures the leg length, 0)
+DEFAULT_DROP_EDGE_SD = 9.0
 #: options of :meth:`ReferencePolicy.settings` added after trained runs began recording their
 #: base (``agents.policies.base_settings``), each with the value that does what the policy did
 #: before it existed (nested as in the settings: a planner field under ``"planner"``): a base
@@ -159,8 +162,8 @@ class ReferencePolicy:
             :data:`DROP_EDGE_CAP` (the configured margin where that is larger). A foot that
             lands off its plan otherwise passes such a riser and swings back into its face;
             once the scans have measured the leg the margin is a few millimetres. Needs
-            ``localise``; 0 (default): off. [standard deviations], in [0,
-            :data:`MAX_LEG_MARGIN`].
+            ``localise``; 0: off; None (default): :data:`DEFAULT_DROP_EDGE_SD` where the
+            policy localises, else 0. [standard deviations], in [0, :data:`MAX_LEG_MARGIN`].
         controller_kwargs: passed to the controller class (``kp``, ``kd`` for :class:`PDPolicy`).
     """
 
@@ -182,7 +185,7 @@ class ReferencePolicy:
         identify: int = DEFAULT_IDENTIFY,
         long_segment: float = DEFAULT_LONG_SEGMENT,
         leg_margin: float = 0.0,
-        drop_edge_sd: float = 0.0,
+        drop_edge_sd: float | None = None,
         **controller_kwargs: Any,
     ):
         est = self.estimator = SensorStateEstimator(
@@ -197,6 +200,8 @@ class ReferencePolicy:
         self.identify = int(identify)
         self.long_segment = checked_long_segment(long_segment)
         self.leg_margin = checked_deviations("leg_margin", leg_margin)
+        if drop_edge_sd is None:
+            drop_edge_sd = DEFAULT_DROP_EDGE_SD if est.localiser is not None else 0.0
         self.drop_edge_sd = checked_deviations("drop_edge_sd", drop_edge_sd)
         for name in ("leg_margin", "drop_edge_sd"):
             if getattr(self, name) and est.localiser is None:

@@ -49,11 +49,12 @@ def test_the_default_duration_is_the_whole_episode(capsys):
 PAPER_WEIGHTS = {"Q": [1.0, 1.0, 1.0], "friction_limit": 0.0}
 
 
-@pytest.mark.parametrize(("controller", "on_top"), [(None, 3), (PAPER_WEIGHTS, 2)])
+@pytest.mark.parametrize(("controller", "on_top"), [(None, 3), (PAPER_WEIGHTS, 3)])
 def test_the_walk_steps_down_one_stair_at_a_time(controller, on_top):
     """The start foot and ``on_top`` touchdowns on the flat (the first step, from standing, is
-    a short one; with the stiff default feedback the replans then take two more short ones,
-    with the paper's weights one), then one touchdown on each stair."""
+    a short one; the replans then take two more short ones, with the paper's weights one where
+    the first plans did not keep the feet off the top stair's riser, ``drop_edge_sd``), then
+    one touchdown on each stair."""
     res = demo.rollout(STAIRS, seed=0, duration=4.0, controller=controller)
     assert res["failure"] is None
     feet = res["foot"]
@@ -90,7 +91,7 @@ def test_the_table_shows_the_lyapunov_value_per_footstep_in_both_modes(capsys):
     argv = ["demo", "--no-figures", "--duration", "3"]
     paper = ["--controller", "Q=[1,1,1]", "friction_limit=0"]
     # the paper's weights, then the stiff default, whose P weighs y far more (larger V)
-    for settings, footsteps, v_end in ((paper, 3, 1.0), ([], 4, 2.5)):
+    for settings, footsteps, v_end in ((paper, 4, 1.0), ([], 4, 2.5)):
         assert main([*argv, *settings]) == 0
         out = capsys.readouterr().out
         for header in ("start", "end", "/V start", "|x_perp|", "|u|"):

