@@ -52,9 +52,9 @@ PAPER_WEIGHTS = {"Q": [1.0, 1.0, 1.0], "friction_limit": 0.0}
 @pytest.mark.parametrize(("controller", "on_top"), [(None, 3), (PAPER_WEIGHTS, 3)])
 def test_the_walk_steps_down_one_stair_at_a_time(controller, on_top):
     """The start foot and ``on_top`` touchdowns on the flat (the first step, from standing, is
-    a short one; the replans then take two more short ones, with the paper's weights one where
-    the first plans did not keep the feet off the top stair's riser, ``drop_edge_sd``), then
-    one touchdown on each stair."""
+    a short one; the replans then take two more short ones: with the paper's weights the
+    second comes from the first plans keeping the feet off the top stair's riser,
+    ``drop_edge_sd``, without which they took one), then one touchdown on each stair."""
     res = demo.rollout(STAIRS, seed=0, duration=4.0, controller=controller)
     assert res["failure"] is None
     feet = res["foot"]
