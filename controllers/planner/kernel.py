@@ -487,6 +487,14 @@ def step_values(P, free, common, problem):
 
 
 @_jit
+def step_residuals(P, free, common, problem):
+    """:func:`step_values` and the cost's terms ``(B, R)`` (:attr:`StepOutputs.residuals`):
+    what the Gauss-Newton scaling of a solve needs, without the full evaluation."""
+    _, out, g = evaluate_shapes(P, free, NO_ROWS, NO_ROWS, False, common, problem)
+    return out.cost, g, out.residuals
+
+
+@_jit
 def pair_values(P, free, n, common, first, second):
     """The cost ``(B,)`` and packed constraints ``(B, packed + packed2)`` of a step and the
     next one optimised together: ``free[:, :n]`` the first step's free coefficients,
@@ -497,6 +505,25 @@ def pair_values(P, free, n, common, first, second):
 
     A row whose first step repeats an earlier row's (a forward difference in the second step's
     coefficients) reuses that row's first step: the same numbers, one evaluation fewer."""
+    cost, g, _, _, _ = _pair(P, free, n, common, first, second)
+    return cost, g
+
+
+@_jit
+def pair_residuals(P, free, n, common, first, second):
+    """:func:`pair_values` and the pair's cost terms ``(B, R + R2)``, the first step's then the
+    second's (:func:`step_residuals` for a pair)."""
+    cost, g, r1, r2, at = _pair(P, free, n, common, first, second)
+    res = np.empty((free.shape[0], r1.shape[1] + r2.shape[1]))
+    res[:, : r1.shape[1]] = r1[at]
+    res[:, r1.shape[1] :] = r2
+    return cost, g, res
+
+
+@_jit
+def _pair(P, free, n, common, first, second):
+    """:func:`pair_values`'s cost and constraints, with the two steps' residuals (the first
+    step's by distinct row) and each row's first step among the distinct ones."""
     nb = free.shape[0]
     rows, at = _distinct_rows(free, n)  # at: each row's first step among those evaluated
     _, o1, g1 = evaluate_shapes(P, free[rows, :n], NO_ROWS, NO_ROWS, False, common, first)
@@ -512,7 +539,7 @@ def pair_values(P, free, n, common, first, second):
     g = np.empty((nb, g1.shape[1] + g2.shape[1]))
     g[:, : g1.shape[1]] = g1[at]
     g[:, g1.shape[1] :] = g2
-    return o1.cost[at] + o2.cost, g
+    return o1.cost[at] + o2.cost, g, o1.residuals, o2.residuals, at
 
 
 @_jit

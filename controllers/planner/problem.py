@@ -333,6 +333,25 @@ class StepEvaluator:
         _, shape_ref, problem = self._problem_data(fx, False)
         return kernel.step_values(self.P, self._free(free), self._common(shape_ref), problem)
 
+    def step_residuals(
+        self, fx: FixedStep, free: np.ndarray
+    ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """:meth:`step_values` and the cost's terms ``(B, R)`` (``evaluate_batch``'s
+        ``"residuals"``), in one compiled call: the same numbers."""
+        _, shape_ref, problem = self._problem_data(fx, False)
+        return kernel.step_residuals(self.P, self._free(free), self._common(shape_ref), problem)
+
+    def pair_residuals(
+        self, fx: FixedStep, fx2: FixedStep, free: np.ndarray
+    ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """:meth:`pair_values` and the pair's cost terms ``(B, R + R2)``, the first step's then
+        the second's, in one compiled call: the same numbers."""
+        _, shape_ref, first = self._problem_data(fx, False)
+        second = self._problem_data(fx2, False)[2]
+        return kernel.pair_residuals(
+            self.P, self._free(free, 2), self.cfg.order - 2, self._common(shape_ref), first, second
+        )
+
     def pair_values(
         self, fx: FixedStep, fx2: FixedStep, free: np.ndarray
     ) -> tuple[np.ndarray, np.ndarray]:
@@ -565,7 +584,9 @@ class BatchProblem:
     once; once it is spent, any further evaluation raises :class:`BudgetExhausted` (a payload
     asked for at a point already evaluated is not accounted again). ``residuals(payload)``
     (optional) gives the cost's terms of a batch, ``(B, R)`` with ``cost = sum(r^2)`` row by
-    row: the Gauss-Newton model of :meth:`minimize` with ``scaled``.
+    row: the Gauss-Newton model of :meth:`minimize` with ``scaled``. ``residual_values(X)``
+    (optional) returns ``(cost, g, R)``, the same numbers without the payload: then the model
+    is taken from it.
     """
 
     def __init__(
@@ -574,11 +595,14 @@ class BatchProblem:
         budget: SearchBudget | None = None,
         residuals: Callable[[Any], np.ndarray] | None = None,
         values: Callable[[np.ndarray], tuple[np.ndarray, np.ndarray]] | None = None,
+        residual_values: Callable[[np.ndarray], tuple[np.ndarray, np.ndarray, np.ndarray]]
+        | None = None,
     ):
         self.fn = fn
         self.budget = budget
         self.residuals = residuals
         self.values = values
+        self.residual_values = residual_values
         self.cache: dict[bytes, tuple[float, np.ndarray, Any, int]] = {}
         self._jac: dict[bytes, tuple[np.ndarray, np.ndarray]] = {}
         # forward-difference batches evaluated whole: (points, costs, constraints) by point
@@ -681,8 +705,11 @@ class BatchProblem:
             return None
         x0 = np.ascontiguousarray(x0, dtype=np.float64)
         X = _fd_points(x0)
-        rows = self.evaluate_many(X, payload=True)
-        R = np.stack([self.residuals(p)[r] for _, _, p, r in rows])
+        if self.residual_values is not None:
+            R = self._residual_rows(X)
+        else:
+            rows = self.evaluate_many(X, payload=True)
+            R = np.stack([self.residuals(p)[r] for _, _, p, r in rows])
         with np.errstate(all="ignore"):
             J = (R[1:] - R[0]).T / (np.diag(X[1:]) - x0)
             H = 2.0 * J.T @ J
@@ -692,6 +719,18 @@ class BatchProblem:
         if not w[-1] > 0:
             return None
         return (V / np.sqrt(np.maximum(w, _SCALING_FLOOR * w[-1]))) @ V.T
+
+    def _residual_rows(self, X: np.ndarray) -> np.ndarray:
+        """The cost's terms at the rows of ``X`` from ``residual_values``, its rows not
+        evaluated yet accounted and cached as :meth:`_fill` does (without their payload)."""
+        keys = [x.tobytes() for x in X]
+        todo = [i for i, k in enumerate(keys) if k not in self.cache]
+        if todo and self.budget is not None:
+            self.budget.spend(len(todo))
+        cost, g, R = self.residual_values(X)
+        for i in todo:
+            self.cache[keys[i]] = (float(cost[i]), g[i], None, i)
+        return R
 
     def minimize(
         self,

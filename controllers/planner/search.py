@@ -430,7 +430,11 @@ class StepSearch:
             return np.concatenate([ev["residuals"], ev["next_residuals"]], axis=1)
 
         prob = BatchProblem(
-            batch, self.evaluations, residuals, lambda X: sm.pair_values(fx, fx2, X)
+            batch,
+            self.evaluations,
+            residuals,
+            lambda X: sm.pair_values(fx, fx2, X),
+            lambda X: sm.pair_residuals(fx, fx2, X),
         )
         key = self._problem_key(fx, fx2)
         if key in memo.failed:
@@ -483,7 +487,11 @@ class StepSearch:
             return ev["cost"], ev["g"], ev
 
         prob = BatchProblem(
-            batch, self.evaluations, lambda ev: ev["residuals"], lambda X: sm.step_values(fx, X)
+            batch,
+            self.evaluations,
+            lambda ev: ev["residuals"],
+            lambda X: sm.step_values(fx, X),
+            lambda X: sm.step_residuals(fx, X),
         )
 
         def run(xs):

@@ -64,6 +64,7 @@ def _pair_batch(sm, fx, fx2, X):
     e1 = sm.evaluate_batch(fx, X[:, :n])
     thd2 = e1["delta"] * e1["thetadot_minus"]
     e2 = sm.evaluate_batch(fx2, X[:, n:], slope=e1["slope_plus"], thetadot_plus=thd2)
+    e1["next_residuals"] = e2["residuals"]
     return e1["cost"] + e2["cost"], np.concatenate([e1["g"], e2["g"]], axis=1), e1
 
 
@@ -85,6 +86,41 @@ def test_the_compiled_values_are_the_full_evaluations_numbers(planners):
     assert g.shape[1] > ev["g"].shape[1]  # both steps' constraints
     with pytest.raises(ValueError, match="free coefficients of shape"):
         sm.step_values(fx, x)  # a pair's coefficients for one step
+
+
+def test_the_compiled_residuals_are_the_full_evaluations_terms(planners):
+    """The cost terms of the Gauss-Newton scaling from the compiled calls (a step; a pair, the
+    first step's terms then the second's) are, bit for bit, the full evaluations', and so are
+    the cost and constraints that come with them; the scaling made from them is the same, and
+    so are the evaluations it accounts."""
+    sm, fx, fx2, x = _pair(planners)
+    n = x.shape[1] // 2
+    cost, g, res = sm.step_residuals(fx, x[:, :n])
+    ev = sm.evaluate_batch(fx, x[:, :n])
+    assert np.array_equal(res, ev["residuals"]) and np.array_equal(cost, ev["cost"])
+    assert np.array_equal(g, ev["g"], equal_nan=True)
+    for X in (x, np.vstack([x[0], x[0] + 1e-8 * np.eye(2 * n), x[1]])):
+        cost, g, res = sm.pair_residuals(fx, fx2, X)
+        cost2, g2, e1 = _pair_batch(sm, fx, fx2, X)
+        full = np.concatenate([e1["residuals"], e1["next_residuals"]], axis=1)
+        assert np.array_equal(res, full) and np.array_equal(cost, cost2)
+        assert np.array_equal(g, g2, equal_nan=True)
+    scalings = []
+    for compiled in (False, True):
+        budget = SearchBudget(10**6)
+        prob = BatchProblem(
+            lambda X: _pair_batch(sm, fx, fx2, X),
+            budget,
+            lambda e: np.concatenate([e["residuals"], e["next_residuals"]], axis=1),
+            lambda X: sm.pair_values(fx, fx2, X),
+            (lambda X: sm.pair_residuals(fx, fx2, X)) if compiled else None,
+        )
+        T = prob.scaling(x[0])
+        assert (prob.get(x[0])[2] is None) == compiled  # no payload where it was not needed
+        scalings.append((T, budget.used, prob.get(x[0] + 1e-3)[:2]))
+    (T1, u1, (c1, g1)), (T2, u2, (c2, g2)) = scalings
+    assert np.array_equal(T1, T2) and u1 == u2 > 0 and c1 == c2
+    assert np.array_equal(g1, g2, equal_nan=True)
 
 
 def test_an_optimisation_on_the_compiled_values_is_the_one_on_full_evaluations(planners):
