@@ -158,8 +158,9 @@ class PlannerConfig:
             in which the Gauss-Newton model of its cost (a sum of squares) at the start point
             is the identity, SLSQP's first Hessian model, up to a floor on its flattest
             directions (about half the iterations; the optima are the same within the
-            solver's tolerance, the plans not bit for bit); 0 (default): in the free
-            coefficients themselves.
+            solver's tolerance, the plans not bit for bit; the paper robot's preset); 0
+            (the dataclass's and the classic walker's default): in the free coefficients
+            themselves.
 
     The swing-foot geometry is the robot's (:attr:`envs.physics.RobotParams.retract`,
     :attr:`~envs.physics.RobotParams.arm_distance`, the simulator's rule): the planned swing

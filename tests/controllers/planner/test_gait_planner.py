@@ -76,7 +76,9 @@ def test_the_speed_reserve_keeps_a_replan_from_slowing_the_robot_further():
     assert err.value.constraint == "theta_dot^2 bounded away from zero"
     low = GaitPlanner("paper", {**TUBE_RELAXED, "speed_reserve": 0.3})
     same = low.plan(PAPER_STAIRS, SLOWED, (0.379, 0.0), horizon=3)
-    np.testing.assert_array_equal(same.steps[0].coeffs, plain.steps[0].coeffs)
+    # the same optimum; the scaled solve (the preset's) takes the inactive bound's row into
+    # its subproblems, which moves the iterates in the last digits
+    np.testing.assert_allclose(same.steps[0].coeffs, plain.steps[0].coeffs, rtol=1e-6)
 
 
 def test_the_speed_reserve_bounds_the_first_step_only(planners):
@@ -118,8 +120,11 @@ def test_the_dip_floor_bounds_every_step_by_its_own_start_speed(planners):
     assert abs(r1[np.argmin(r0)] - 0.5) < 1e-3  # the bound is what shapes that step
     keep = r0 >= 0.5
     assert keep.sum() >= 3
+    # the same optima within the solver's tolerance (1e-7 on the cost, whose flattest
+    # directions the scaled solves stretch): their speeds agree far closer than their shapes
     for a, b in zip(np.array(plain.steps)[keep], np.array(floored.steps)[keep]):
-        np.testing.assert_allclose(b.coeffs, a.coeffs, atol=1e-6)
+        np.testing.assert_allclose(b.coeffs, a.coeffs, atol=1e-3)
+        assert b.thetadot_minus == pytest.approx(a.thetadot_minus, rel=1e-4)
     np.testing.assert_array_equal(plan({"dip_floor": 0.0}).steps[-1].coeffs, plain.steps[-1].coeffs)
     with pytest.raises(PlanningError) as err:
         plan({"dip_floor": 0.7})

@@ -69,11 +69,20 @@ def test_a_scaled_solve_reaches_the_same_optimum_in_fewer_evaluations(planners, 
     assert len(calls_scaled) < len(calls_plain)
 
 
+def test_the_paper_robot_plans_with_scaled_solves_the_classic_walker_without():
+    """The paper robot's preset turns the scaling on (held out before it became the default);
+    the dataclass and the classic walker keep the coefficients themselves."""
+    assert GaitPlanner("paper").config.gauss_newton_scaling == 1
+    assert GaitPlanner("classic").config.gauss_newton_scaling == 0
+    assert GaitPlanner("paper", {"gauss_newton_scaling": 0}).config.gauss_newton_scaling == 0
+
+
+@pytest.mark.parametrize("scaling", [0, 1])
 @pytest.mark.parametrize("terrain", ["paper_stairs", "blocks_high"])
-def test_scaled_plans_follow_open_loop_pfl(terrain):
-    """The plans made with the scaling pass the checks of the default's: the nonlinear model
+def test_plans_follow_open_loop_pfl_scaled_or_not(terrain, scaling):
+    """The plans made with and without the scaling pass the same checks: the nonlinear model
     under PFL follows them through touchdowns and impacts."""
-    pl = GaitPlanner("paper", {"gauss_newton_scaling": 1})
+    pl = GaitPlanner("paper", {"gauss_newton_scaling": scaling})
     g = pl.periodic_gait()
     plan = pl.plan(CASES["paper"][terrain], (g.q, g.qd), (0.0, 0.0), horizon=HORIZON["paper"])
     assert len(plan) == HORIZON["paper"]
@@ -82,12 +91,13 @@ def test_scaled_plans_follow_open_loop_pfl(terrain):
         assert r["foot_err"] < 1e-5, (j, r)
 
 
-def test_the_reference_policy_walks_with_scaled_solves():
+@pytest.mark.parametrize("scaling", [0, 1])
+def test_the_reference_policy_walks_scaled_or_not(scaling):
     """In closed loop on rough ground (difficulty 1, a validation course) it walks to the time
-    limit, every footstep planned in full."""
+    limit, every footstep planned in full, with the default (scaled) and the previous one."""
     env = gym.make("roughwalk/CompassGaitRough-v0", difficulty=1.0)
-    policy = ReferencePolicy(env, planner={"gauss_newton_scaling": 1})
-    assert policy.controller.planner.config.gauss_newton_scaling == 1
+    policy = ReferencePolicy(env, planner={"gauss_newton_scaling": scaling})
+    assert policy.controller.planner.config.gauss_newton_scaling == scaling
     obs, _ = env.reset(seed=1_000_004)
     policy.reset()
     terminated = truncated = False
