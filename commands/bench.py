@@ -390,7 +390,8 @@ def _closed_loop_replanning(
     """Replanning per footstep of the reference policy (sensors, observer, replanning at every
     touchdown) on ``CompassGaitRough-v0`` at ``difficulty``, evaluation seeds 1,001,000 on:
     median, 95th and 99th percentile over the footsteps of ``episodes`` episodes (the planner
-    call, degradations included); the env steps per second of the whole loop (policy and env)
+    call, degradations included), and the step evaluations it spends (the same on any
+    machine); the env steps per second of the whole loop (policy and env)
     against the bare env on the same courses under zero input, in the same run; and the time
     of its online identification per fit (median, 95th percentile, largest). ``planner``,
     ``controller``: changes to the robot's planner and controller defaults (named in the
@@ -398,6 +399,7 @@ def _closed_loop_replanning(
     env = gym.make("roughwalk/CompassGaitRough-v0", difficulty=difficulty)
     policy = ReferencePolicy(env, config=controller, planner={**(base or {}), **(planner or {})})
     times: list[float] = []
+    work: list[int] = []  # step evaluations per footstep: the machine's speed aside
     fits: list[float] = []
     steps, t0 = 0, time.perf_counter()
     for k in range(episodes):
@@ -409,6 +411,7 @@ def _closed_loop_replanning(
             done = terminated or truncated
             steps += 1
         times += [r.plan_time for r in policy.records[1:] if r.plan_time > 0]
+        work += [r.plan_evaluations for r in policy.records[1:] if r.plan_time > 0]
         fits += [r.seconds for r in policy.diagnostics["identified"]]
     loop = steps / (time.perf_counter() - t0)
     # the bare env in the same run: the same courses under zero input, as many steps
@@ -436,6 +439,13 @@ def _closed_loop_replanning(
             f"replanning per footstep in closed loop (median / p95 / p99): {where}",
             f"{median:.1f} / {p95:.1f} / {p99:.1f}",
             "ms",
+        ),
+        (
+            f"step evaluations per footstep in closed loop (median / mean / p99): {where}",
+            f"{np.median(work):.0f} / {np.mean(work):.0f} / {np.percentile(work, 99):.0f}"
+            if work
+            else "-",
+            "",
         ),
         (
             f"reference policy in the loop, env steps/s (its own planning, identification and "
