@@ -612,11 +612,9 @@ class BatchProblem:
         """Evaluate the rows of ``X`` not evaluated yet (with ``payload``, also the payload of
         those evaluated without it); ``(cost, g)`` of the batch if every row was new."""
         keys = [x.tobytes() for x in X]
-        todo = [i for i, k in enumerate(keys) if k not in self.cache]
+        todo = self._accounted(keys)
         fresh = None
         if todo:
-            if self.budget is not None:
-                self.budget.spend(len(todo))
             rows = X[todo] if len(todo) < len(keys) else X
             if self.values is None or payload:
                 cost, g, ev = self.fn(rows)
@@ -634,6 +632,14 @@ class BatchProblem:
                     c, g_row, _, _ = self.cache[keys[i]]
                     self.cache[keys[i]] = (c, g_row, ev, r)
         return fresh
+
+    def _accounted(self, keys: list[bytes]) -> list[int]:
+        """The positions of the points ``keys`` not evaluated yet, accounted in the budget
+        (which raises :class:`BudgetExhausted` once spent) before they are evaluated."""
+        todo = [i for i, k in enumerate(keys) if k not in self.cache]
+        if todo and self.budget is not None:
+            self.budget.spend(len(todo))
+        return todo
 
     def get(self, x: np.ndarray) -> tuple[float, np.ndarray, Any, int]:
         """``(cost, g, payload, row)`` at ``x`` (the payload None if not evaluated yet: see
@@ -724,9 +730,7 @@ class BatchProblem:
         """The cost's terms at the rows of ``X`` from ``residual_values``, its rows not
         evaluated yet accounted and cached as :meth:`_fill` does (without their payload)."""
         keys = [x.tobytes() for x in X]
-        todo = [i for i, k in enumerate(keys) if k not in self.cache]
-        if todo and self.budget is not None:
-            self.budget.spend(len(todo))
+        todo = self._accounted(keys)
         cost, g, R = self.residual_values(X)
         for i in todo:
             self.cache[keys[i]] = (float(cost[i]), g[i], None, i)
