@@ -65,8 +65,12 @@ whose transverse model cannot be built ends the look-ahead). A replan within a s
 state left the plan's tube, or :meth:`TransverseController.replan`) that finds nothing to
 track, not even the rest of the plan under way, keeps tracking the step under way with its
 gains (``fallback = "step under way"``).
-Zero input (``fallback = "zero input"``) remains only when there is nothing at all to track
-(e.g. a non-finite state, or ``theta_dot`` already not positive).
+Where nothing is left to track (no step keeps ``theta_dot`` positive, say: the robot cannot
+crest what is ahead), the robot is not left limp: the swing leg is held at the nominal
+touchdown's inter-leg angle (the preferred step length on level ground) with PD on ``y`` of
+that constant constraint, through the same control tick, until the next touchdown or a replan
+within the step finds a plan (``fallback = "hold posture"``; ``ControllerConfig.posture_hold``).
+Zero input (``fallback = "zero input"``) remains only for a non-finite state.
 The step's :class:`StepRecord` says which, and why (``reason``: every degradation tried, with
 its planning error).
 
@@ -106,11 +110,18 @@ from .fallbacks import (
     fallback_name,
     relaxation_item,
 )
-from .feedback import constraint_at, feedback_law, thetadot_sq_at
+from .feedback import constraint_at, feedback_law, pack_scalars, thetadot_sq_at
 from .gains import GainTable, HorizonSolution, horizon_gains, pd_gains, step_models
 from .numerics import one_blas_thread
-from .planner import GaitPlanner, Plan, PlannerConfig, PlanningError, StepPlan
-from .records import PD_ON_ONE_STEP, STEP_UNDER_WAY, ZERO_INPUT, StepRecord
+from .planner import (
+    GaitPlanner,
+    Plan,
+    PlannerConfig,
+    PlanningError,
+    StepPlan,
+    touchdown_configuration,
+)
+from .records import HOLD_POSTURE, PD_ON_ONE_STEP, STEP_UNDER_WAY, ZERO_INPUT, StepRecord
 from .transverse import StepModel
 
 __all__ = [
@@ -203,6 +214,10 @@ class ControllerConfig:
             ``|f_t| <= friction_limit f_n`` (no clip where no input does); 0 (default) clips to
             ``u_max`` only. Stiff feedback weights otherwise ask for hip torques that make the
             stance foot slip. >= 0.
+        posture_hold: where nothing is left to track at a footstep, hold the swing leg at the
+            nominal touchdown's inter-leg angle with PD on ``y`` (True, default; the record's
+            ``fallback = "hold posture"``), or apply zero input until the next touchdown
+            (False, the behaviour before it).
     """
 
     horizon: int = 3
@@ -225,6 +240,7 @@ class ControllerConfig:
     deeper_relaxation: tuple = ()
     relaxed_feedback: str = "pd"
     friction_limit: float = 0.0
+    posture_hold: bool = True
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "fallbacks", fallback_items(self.fallbacks))
@@ -270,8 +286,11 @@ class ControllerConfig:
                 allowed = "[0, 1]" if name == "tube_phase" else ">= 0"
                 raise ValueError(f"ControllerConfig.{name} = {v!r}; allowed: {allowed}")
             object.__setattr__(self, name, v)
-        if not isinstance(self.replan, (bool, np.bool_)):
-            raise ValueError(f"ControllerConfig.replan = {self.replan!r}; allowed: True or False")
+        for name in ("replan", "posture_hold"):
+            if not isinstance(getattr(self, name), (bool, np.bool_)):
+                raise ValueError(
+                    f"ControllerConfig.{name} = {getattr(self, name)!r}; allowed: True or False"
+                )
         if self.relaxed_feedback not in RELAXED_FEEDBACK:
             raise ValueError(
                 f"ControllerConfig.relaxed_feedback = {self.relaxed_feedback!r}; allowed: "
@@ -427,6 +446,7 @@ class TransverseController:
         self.solution: HorizonSolution | None = None
         self.gain_table: GainTable | None = None
         self._law_args: tuple[np.ndarray, ...] = ()  # gain_table.kernel_args()
+        self._hold: tuple[np.ndarray, ...] | None = None  # the posture hold's, without gains
         self._torque_gain = float(model.input_gain(self.P))  # hip torque per input unit [N m]
         self._plan_offset = 0
         self._relaxed: dict[tuple, GaitPlanner] = {}  # relaxed planners, by relaxation
@@ -628,9 +648,10 @@ class TransverseController:
             rec.fallback = STEP_UNDER_WAY
             return
         if sol is None:
-            rec.fallback = ZERO_INPUT
             self.solution = None
             self.gain_table = None
+            self._hold = self._posture_hold(q) if cfg.posture_hold else None
+            rec.fallback = ZERO_INPUT if self._hold is None else HOLD_POSTURE
             return
         self.solution = sol
         rec.riccati_time = sol.riccati_time
@@ -836,6 +857,7 @@ class TransverseController:
         )
         self.gain_table = table
         self._law_args = table.kernel_args()
+        self._hold = None
         m0 = sol.steps[0]
         c = m0.constraint
         rec = self.records[-1]
@@ -866,9 +888,7 @@ class TransverseController:
         x[0], x[1], x[2], x[3] = q[0], q[1], qd[0], qd[1]
         rec = self.records[-1] if self.records else None
         if self.gain_table is None:
-            if rec is not None:
-                rec.ticks += 1
-            return 0.0
+            return self._without_gains(x, rec)
         u, I, y, yd, _ = feedback_law(self.P, x, *self._law_args)
         if rec is not None and self._leaves_tube(x[1], I, y, rec):
             rec.retargets += 1
@@ -877,8 +897,7 @@ class TransverseController:
             )
             rec.reason = " | ".join(filter(None, ("left the plan's tube: replanned", rec.reason)))
             if self.gain_table is None:
-                rec.ticks += 1
-                return 0.0
+                return self._without_gains(x, rec)
             u, I, y, yd, _ = feedback_law(self.P, x, *self._law_args)
         if rec is not None:
             z = np.array([I, y, yd])
@@ -899,6 +918,33 @@ class TransverseController:
             rec.saturated += int(abs(u) >= self.robot.u_max)
             rec.ticks += 1
         return u
+
+    def _without_gains(self, x: np.ndarray, rec: StepRecord | None) -> float:
+        """Input of a tick with no plan's gains loaded: the posture hold's, else zero."""
+        u = 0.0 if self._hold is None else feedback_law(self.P, x, *self._hold)[0]
+        if rec is not None:
+            rec.ticks += 1
+            rec.max_abs_u = max(rec.max_abs_u, abs(u))
+            rec.saturated += int(abs(u) >= self.robot.u_max)
+        return u
+
+    def _posture_hold(self, q: np.ndarray) -> tuple[np.ndarray, ...] | None:
+        """The control tick's arguments (as :meth:`GainTable.kernel_args`) that hold the swing
+        leg at the nominal touchdown's inter-leg angle (a step of the planner's
+        ``step_length`` on level ground) from the state's phase ``q[1]`` [rad] on: the
+        constant constraint ``phi = q1``, PD on ``y`` (:data:`FALLBACK_PD`), no speed
+        feedback, the actuator limit and friction clip of the plans. None where ``q`` is not
+        finite."""
+        if not np.all(np.isfinite(q)):
+            return None
+        q1, _ = touchdown_configuration(self.planner.config.step_length, 0.0, self.robot.l)
+        th = float(q[1])
+        limit = self.config.friction_limit
+        slope = self.terrain.slope_at(self._stance[0]) if limit > 0 else 0.0
+        tab = pack_scalars(th, 1.0, th, 1.0, th, 1.0, self.robot.u_max, 0.0, limit, slope)
+        kp, kd = FALLBACK_PD
+        K = np.tile(np.array([0.0, -kp, -kd]), (2, 1))
+        return tab, np.array([float(q1)]), np.zeros(2), np.zeros(2), K
 
     def _leaves_tube(self, theta: float, I: float, y: float, rec: StepRecord) -> bool:
         """Whether the state has been outside the plan's tube (``ControllerConfig.tube_*``)

@@ -9,13 +9,23 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-__all__ = ["PD_ON_ONE_STEP", "STEP_UNDER_WAY", "ZERO_INPUT", "IdentificationRecord", "StepRecord"]
+__all__ = [
+    "HOLD_POSTURE",
+    "PD_ON_ONE_STEP",
+    "STEP_UNDER_WAY",
+    "ZERO_INPUT",
+    "IdentificationRecord",
+    "StepRecord",
+]
 
 #: ``StepRecord.fallback`` of a step held with PD on ``y`` (no two steps to track)
 PD_ON_ONE_STEP = "PD on the last planned step"
 #: ... of a step whose replan within it found nothing to track: the step under way is tracked on
 STEP_UNDER_WAY = "step under way"
-#: ... of a step with nothing to track at all
+#: ... of a step with no motion to track, the robot upright: the swing leg held at the nominal
+#: touchdown's inter-leg angle with PD on ``y`` (a constant constraint)
+HOLD_POSTURE = "hold posture"
+#: ... of a step with nothing to track at all (a non-finite state)
 ZERO_INPUT = "zero input"
 
 
@@ -75,7 +85,9 @@ class StepRecord:
             ``ControllerConfig.deeper_relaxation`` planned further than the full problem),
             ``"previous plan"``, ``"least violation"``, ``"PD on the last planned step"``,
             ``"step under way"`` (a replan within the step found nothing to track, and the
-            step being tracked is tracked on) or ``"zero input"`` (see the module docstring of
+            step being tracked is tracked on), ``"hold posture"`` (no step to track: the swing
+            leg held at the nominal touchdown's inter-leg angle) or ``"zero input"`` (a
+            non-finite state; see the module docstring of
             :mod:`controllers.controller`); reason: the planning errors of the degradations
             tried (``" | "`` between them).
         plan_evaluations: step evaluations the planner calls of the step spent (all
@@ -122,14 +134,21 @@ class StepRecord:
     def certificate(self) -> dict[str, float | None]:
         """The step's certificate values as plain data: ``V_start``, ``V_end``, ``V_ratio``,
         ``max_xperp_norm``, ``max_abs_u``; None for what is unknown or not finite, and for
-        the ``V`` values of a step without Riccati gains (held with PD, or zero input)."""
-        riccati = not self.pd_feedback and self.fallback not in (PD_ON_ONE_STEP, ZERO_INPUT)
+        the ``V`` values of a step without Riccati gains (held with PD, a posture held, or zero
+        input)."""
+        riccati = not self.pd_feedback and self.fallback not in (
+            PD_ON_ONE_STEP,
+            HOLD_POSTURE,
+            ZERO_INPUT,
+        )
         values = {
             "V_start": self.V_start if riccati else math.nan,
             "V_end": self.V_end if riccati else math.nan,
             "V_ratio": self.V_ratio if riccati else math.nan,
             "max_xperp_norm": (
-                self.max_xperp_norm if self.ticks and self.fallback != ZERO_INPUT else math.nan
+                self.max_xperp_norm
+                if self.ticks and self.fallback not in (HOLD_POSTURE, ZERO_INPUT)
+                else math.nan
             ),
             "max_abs_u": self.max_abs_u if self.ticks else math.nan,
         }

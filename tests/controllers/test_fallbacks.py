@@ -4,7 +4,10 @@ import numpy as np
 import pytest
 
 from controllers import ControllerConfig, GaitPlanner, TransverseController
+from controllers.controller import FALLBACK_PD
 from controllers.fallbacks import DEFAULT_FALLBACKS
+from controllers.planner import touchdown_configuration
+from controllers.reduced import pfl_terms
 from envs.physics.terrain import Terrain
 
 # a 7.5 mm rise the paper robot climbs with its hip input within 0.8 u_max but not within 0.3
@@ -63,26 +66,72 @@ def test_without_degradations_the_same_course_ends_in_a_fall_or_zero_input(gait)
     assert "PD on the last planned step" in kinds or out["failure"] is not None, kinds
 
 
-def test_least_violating_steps_replace_zero_input(gait):
+def test_least_violating_steps_replace_the_posture_hold(gait):
     """A 12.5 mm rise: no feasible step from the second footstep on; the least-violating steps
-    are tracked (input applied, upright to the end of the run) where the plain chain went limp
-    (zero input)."""
+    are tracked (input applied, upright to the end of the run) where the plain chain is left
+    with nothing to track (the posture held; zero input before it)."""
     rise = Terrain.stairs([0.33], [0.0125])
     # the swing foot 3 mm over the ground (the paper robot's default until it became 6 mm),
     # where the plain chain is left with nothing to track
     planner = {**ROOMY_PLANNER, "clearance": 0.003}
     plain, _ = walk(rise, gait, ControllerConfig(fallbacks=[], **ROOMY), planner, 3.0)
-    assert "zero input" in [r.fallback for r in plain["records"]]
+    assert "hold posture" in [r.fallback for r in plain["records"]]
     cfg = ControllerConfig(fallbacks=["least violation"], **ROOMY)
     out, ctrl = walk(rise, gait, cfg, planner, 3.0)
     kinds = [r.fallback for r in out["records"]]
-    assert "least violation" in kinds and "zero input" not in kinds, kinds
+    assert "least violation" in kinds and "hold posture" not in kinds, kinds
+    assert "zero input" not in kinds
     assert out["failure"] is None and out["t"][-1] >= plain["t"][-1]
     for r in out["records"]:
         if r.fallback == "least violation":
             assert r.degradations == ["full problem", "least violation"]
             assert "least violation: worst violation" in r.reason
             assert r.max_abs_u > 0 and r.ticks > 0 and r.pd_feedback
+
+
+def test_with_nothing_to_track_the_swing_leg_is_held_and_the_walk_goes_on(gait):
+    """The plain chain (no degradations) on a 12.5 mm rise: after its last planned step nothing
+    is left to track. The swing leg is then held at the nominal touchdown's inter-leg angle
+    (a ``step_length`` step on level ground) with PD on ``y`` through the control tick (the
+    input that gives ``y_ddot = -kp y - kd y_dot`` within the actuator limit): the body tips
+    over the stance leg, the held foot lands on the upper tread and the full problem plans
+    every footstep after it. Zero input (``posture_hold=False``, the behaviour before it) trips
+    here; it is left for a non-finite state only."""
+    rise = Terrain.stairs([0.33], [0.0125])
+    planner = {**ROOMY_PLANNER, "clearance": 0.003}
+    limp, _ = walk(
+        rise, gait, ControllerConfig(fallbacks=[], posture_hold=False, **ROOMY), planner, 8.0, 12
+    )
+    assert [r.fallback for r in limp["records"]][3] == "zero input"
+    assert limp["failure"] == "trip" and len(limp["impacts"]) == 3
+    out, ctrl = walk(rise, gait, ControllerConfig(fallbacks=[], **ROOMY), planner, 8.0, 12)
+    kinds = [r.fallback for r in out["records"]]
+    assert kinds[:4] == [
+        "shorter horizon",
+        "shorter horizon",
+        "PD on the last planned step",
+        "hold posture",
+    ], kinds
+    assert out["failure"] is None and len(out["impacts"]) >= 8
+    assert all(k is None for k in kinds[4:]) and len(kinds) >= 9
+    held = out["records"][3]
+    assert held.ticks > 0 and held.max_abs_u > 0 and held.degradations == ["full problem"]
+    assert held.certificate()["V_start"] is None  # no Riccati gains: no certificate
+    assert ctrl._stance[1] == pytest.approx(0.0125)  # on the upper tread
+    target = touchdown_configuration(ctrl.planner.config.step_length, 0.0, ctrl.robot.l)[0]
+    during = (out["t"] > out["impacts"][2]) & (out["t"] < out["impacts"][3])
+    q, qd, u = out["q"][during], out["qd"][during], out["u"][during]
+    assert q[0, 0] < target - 0.3  # the swing leg starts behind ...
+    assert np.min(np.abs(q[:, 0] - target)) < 0.01  # ... and is brought to the held angle
+    # every tick within the actuator limit: PD on y through the partial feedback linearisation
+    kp, kd = FALLBACK_PD
+    free = np.abs(u) < ctrl.robot.u_max
+    assert free.sum() > 0.9 * u.size
+    n, r = pfl_terms(ctrl.P, q[:, 0], q[:, 1], qd[:, 0], qd[:, 1], 0.0, 0.0)
+    np.testing.assert_allclose(
+        (n * u + r)[free], (-kp * (q[:, 0] - target) - kd * qd[:, 0])[free], rtol=1e-9
+    )
+    assert ctrl._posture_hold(np.array([np.nan, 0.1])) is None  # zero input's one case
 
 
 def test_degradation_order_is_configurable_and_validated():
@@ -99,6 +148,10 @@ def test_degradation_order_is_configurable_and_validated():
     for bad in ("least violation", ["zero input"], [{"no_such_field": 1.0}], [{}], [3]):
         with pytest.raises(ValueError, match="fallbacks"):
             ControllerConfig(fallbacks=bad)
+    assert cfg.posture_hold is True
+    assert not ControllerConfig.from_dict({**cfg.to_dict(), "posture_hold": False}).posture_hold
+    with pytest.raises(ValueError, match="posture_hold = 'no'; allowed: True or False"):
+        ControllerConfig(posture_hold="no")
     with pytest.raises(ValueError, match="relaxed_feedback = 'lqr'; allowed: 'pd', 'riccati'"):
         ControllerConfig(relaxed_feedback="lqr")
     with pytest.raises(ValueError, match="torque_fraction"):  # checked by the robot's planner
@@ -153,12 +206,12 @@ def test_the_deeper_relaxation_is_validated():
 
 def test_a_stance_foot_between_foothold_windows_walks_on_with_relaxed_riser_margins(gait):
     """Two 3 cm stairs down, the first riser 0.10 m ahead: with the full riser margins no
-    problem has a foothold at the first step and the controller goes limp (zero input); the
-    paper robot's planner relaxes the margins for that step (recorded in the step's reason)
-    and the robot walks down both stairs."""
+    problem has a foothold at the first step and the controller has nothing to track (it holds
+    the posture; before, zero input); the paper robot's planner relaxes the margins for that
+    step (recorded in the step's reason) and the robot walks down both stairs."""
     stairs = Terrain.stairs([0.10, 0.32], [-0.03, -0.03])
     plain, _ = walk(stairs, gait, ControllerConfig(), {"relaxed_margin": 1.0}, duration=4.0)
-    assert plain["records"][0].fallback == "zero input"
+    assert plain["records"][0].fallback == "hold posture"
     out, ctrl = walk(stairs, gait, ControllerConfig(), duration=4.0)
     first = out["records"][0]
     assert first.fallback is None and "riser margins relaxed" in first.reason

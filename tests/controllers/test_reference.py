@@ -114,7 +114,7 @@ def test_planning_failure_falls_back_without_crashing():
     assert all(
         k in {"shorter horizon", "previous plan", "least violation", "PD on the last planned step"}
         or k.startswith("relaxed: ")
-        or k == "zero input"
+        or k == "hold posture"
         for k in kinds
     ), kinds
 
