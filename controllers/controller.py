@@ -844,9 +844,14 @@ class TransverseController:
     def _gains(self, models: list[StepModel]) -> HorizonSolution:
         return horizon_gains(models, self.config)
 
-    def _load(self, sol: HorizonSolution) -> None:
+    def _friction_clip(self) -> tuple[float, float]:
+        """The control tick's friction-cone clip: ``(friction_limit, slope)``, the ground slope
+        ``dh/dx`` under the stance foot (0 where the clip is off)."""
         limit = self.config.friction_limit
-        slope = self.terrain.slope_at(self._stance[0]) if limit > 0 else 0.0
+        return limit, (self.terrain.slope_at(self._stance[0]) if limit > 0 else 0.0)
+
+    def _load(self, sol: HorizonSolution) -> None:
+        limit, slope = self._friction_clip()
         table = GainTable.from_solution(
             sol,
             self.robot.u_max,
@@ -939,9 +944,7 @@ class TransverseController:
             return None
         q1, _ = touchdown_configuration(self.planner.config.step_length, 0.0, self.robot.l)
         th = float(q[1])
-        limit = self.config.friction_limit
-        slope = self.terrain.slope_at(self._stance[0]) if limit > 0 else 0.0
-        tab = pack_scalars(th, 1.0, th, 1.0, th, 1.0, self.robot.u_max, 0.0, limit, slope)
+        tab = pack_scalars(th, 1.0, th, 1.0, th, 1.0, self.robot.u_max, 0.0, *self._friction_clip())
         kp, kd = FALLBACK_PD
         K = np.tile(np.array([0.0, -kp, -kd]), (2, 1))
         return tab, np.array([float(q1)]), np.zeros(2), np.zeros(2), K

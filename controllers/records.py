@@ -13,6 +13,7 @@ __all__ = [
     "HOLD_POSTURE",
     "PD_ON_ONE_STEP",
     "STEP_UNDER_WAY",
+    "WITHOUT_PLAN",
     "ZERO_INPUT",
     "IdentificationRecord",
     "StepRecord",
@@ -27,6 +28,8 @@ STEP_UNDER_WAY = "step under way"
 HOLD_POSTURE = "hold posture"
 #: ... of a step with nothing to track at all (a non-finite state)
 ZERO_INPUT = "zero input"
+#: the fallbacks with no planned motion: no transverse coordinates, no certificate
+WITHOUT_PLAN = (HOLD_POSTURE, ZERO_INPUT)
 
 
 @dataclass(frozen=True)
@@ -136,18 +139,14 @@ class StepRecord:
         ``max_xperp_norm``, ``max_abs_u``; None for what is unknown or not finite, and for
         the ``V`` values of a step without Riccati gains (held with PD, a posture held, or zero
         input)."""
-        riccati = not self.pd_feedback and self.fallback not in (
-            PD_ON_ONE_STEP,
-            HOLD_POSTURE,
-            ZERO_INPUT,
-        )
+        riccati = not self.pd_feedback and self.fallback not in (PD_ON_ONE_STEP, *WITHOUT_PLAN)
         values = {
             "V_start": self.V_start if riccati else math.nan,
             "V_end": self.V_end if riccati else math.nan,
             "V_ratio": self.V_ratio if riccati else math.nan,
             "max_xperp_norm": (
                 self.max_xperp_norm
-                if self.ticks and self.fallback not in (HOLD_POSTURE, ZERO_INPUT)
+                if self.ticks and self.fallback not in WITHOUT_PLAN
                 else math.nan
             ),
             "max_abs_u": self.max_abs_u if self.ticks else math.nan,

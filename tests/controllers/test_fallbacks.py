@@ -58,7 +58,7 @@ def test_relaxed_plans_can_keep_the_transverse_feedback(gait):
     assert all(np.isfinite(r.certificate()["V_end"]) for r in relaxed)
 
 
-def test_without_degradations_the_same_course_ends_in_a_fall_or_zero_input(gait):
+def test_without_degradations_the_same_course_ends_in_a_fall_or_a_single_step(gait):
     plain = ControllerConfig(fallbacks=[], **ROOMY)
     out, _ = walk(RISE, gait, plain, {**TIGHT, **ROOMY_PLANNER})
     kinds = [r.fallback for r in out["records"]]
