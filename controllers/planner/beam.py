@@ -142,7 +142,7 @@ def _expand(search, br: _Branch, j: int, near, far, rel, budget: SearchBudget, l
             budget.spend(X.shape[0])
         except BudgetExhausted:  # the branches keep what they have
             break
-        ev = sm.evaluate_batch(fx, X)
+        ev = sm.evaluate_batch(fx, X, screen=_FEASIBLE)  # only the feasible rows are kept
         ok = np.nonzero(np.min(ev["g"], axis=1) >= _FEASIBLE)[0]
         if ok.size == 0:
             continue

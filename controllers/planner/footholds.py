@@ -447,6 +447,9 @@ def _foothold_table(
     nt, nf = tx.size, features.size
     far = max(rise_margin * max_rise, drop_edge_margin)
     reach = x0 + step_min + res * (n - 1) + edge_margin + far
+    # the faces with x0 <= x <= reach (the faces come in order of x)
+    f0 = np.searchsorted(faces[:, 0], x0, side="left")
+    f1 = np.searchsorted(faces[:, 0], reach, side="right")
     for k in range(n):
         xk = x0 + step_min + res * k
         yk = terrain_height(tx, ty, nt, xk)
@@ -461,10 +464,8 @@ def _foothold_table(
             near = min(abs(xk - left), abs(right - xk))
         ok = near >= edge_margin
         demote = False
-        for f in range(faces.shape[0]):
+        for f in range(f0, f1):
             xf, ya, yb = faces[f, 0], faces[f, 1], faces[f, 2]
-            if xf < x0 or xf > reach:
-                continue
             if x0 < xf and ya > yb:  # a step down between the stance foot and the candidate
                 ok = ok and (xk <= xf or xk - xf >= edge_margin + drop_margin * (ya - yb))
             if 0 < yb - ya <= max_rise:  # a step up ahead of the candidate (not a wall)
@@ -484,17 +485,10 @@ def _foothold_table(
                 score[k] += 2.0 * abs(q2 - q1 - sigma_target)
         if demote:
             score[k] += 100.0  # ranked after every candidate clear of such a riser
-    # admissible candidates by score, ties in order of x (a stable insertion sort)
-    order = np.empty(n, dtype=np.int64)
-    m = 0
-    for k in range(n):
-        if ok_edge[k] and ok_h[k] and ok_reach[k]:
-            i = m
-            while i > 0 and score[order[i - 1]] > score[k]:
-                order[i] = order[i - 1]
-                i -= 1
-            order[i] = k
-            m += 1
+    # admissible candidates by score, ties in order of x (a stable sort)
+    keep = np.nonzero(ok_edge & ok_h & ok_reach)[0]
+    order = keep[np.argsort(score[keep], kind="mergesort")]
+    m = order.size
     seen = np.zeros(5)
     seen[0] = 1.0 if np.any(ok_edge) else 0.0
     seen[1] = 1.0 if np.any(ok_edge & ok_h) else 0.0

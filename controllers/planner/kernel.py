@@ -161,7 +161,7 @@ def cost_term(res, i, weight, r):
 
 @_jit
 def evaluate_steps(
-    P, a, thd_plus_in, periodic, use_ref, shape_ref, cfg, step, grids, ground, col, out
+    P, a, thd_plus_in, periodic, use_ref, shape_ref, cfg, step, grids, ground, col, out, screen
 ):
     """Evaluate the steps with Bezier coefficients ``a`` (``(B, M + 1)``), one row each.
 
@@ -172,6 +172,12 @@ def evaluate_steps(
     :class:`StepSettings`; ``step``: :class:`StepScalars`; ``grids``: :class:`StepGrids`;
     ``ground``: :class:`StepGround`; ``col``: first column of each constraint group in
     ``out.constraints``, by group name. Writes ``out`` (:class:`StepOutputs`).
+
+    ``screen``: a row with a constraint of the dynamics below it (``theta_dot^2`` on the nodes,
+    the duration bounds, ``alpha``, the input, the stance-foot reaction; checked in that order)
+    is left there (:func:`_screened`): it is infeasible for any feasibility threshold at or
+    above ``screen``, and the rest of its evaluation is skipped (``-inf``: every row is
+    evaluated whole). Most shapes sampled over a wide range fail there.
     """
     snodes, B0, B1, B2 = grids.nodes, grids.basis, grids.dbasis, grids.ddbasis
     sg, Bg, qint, interp, clear_req = (
@@ -254,7 +260,17 @@ def evaluate_steps(
         fmin = step.fmin if periodic else max(step.fmin, (cfg.dip_floor * thp) ** 2)
         rd.grid_step_time(F[b], qint, half, lo, thd, tcum)
         T = tcum[nn - 1]
+        if screen > -math.inf:
+            low = min(
+                (T - cfg.duration_min) / cfg.duration_min, (cfg.duration_max - T) / cfg.duration_min
+            )
+            for k in range(nn):
+                low = min(low, (F[b, k] - fmin) / (thd_ref * thd_ref))
+            if low < screen:
+                _screened(out, b)
+                continue
         # nominal input and stance-foot reaction along the motion
+        cut = False
         for k in range(nn):
             f = max(F[b, k], lo)
             a_safe = max(al[k], al_min)
@@ -271,6 +287,20 @@ def evaluate_steps(
             G[b, col.stance_reaction + nn + k] = (
                 model.friction_cone_margin(fn, ft, cfg.friction) / weight
             )
+            if screen > -math.inf and (
+                min(
+                    G[b, col.alpha + k],
+                    G[b, col.torque + k],
+                    G[b, col.stance_reaction + k],
+                    G[b, col.stance_reaction + nn + k],
+                )
+                < screen
+            ):
+                cut = True
+                break
+        if cut:
+            _screened(out, b)
+            continue
         rd.matvec(interp, F[b], fk)  # theta_dot^2 on the check grid
         for k in range(nk):
             G[b, col.thetadot_sq + nn + k] = (fk[k] - fmin) / (thd_ref * thd_ref)
@@ -384,6 +414,24 @@ def evaluate_steps(
         out.gain[b] = gain
 
 
+@_jit
+def _screened(out, b):
+    """Mark row ``b`` of ``out`` as left by :func:`evaluate_steps`'s screen: its scalar outputs
+    NaN (its constraints not written stay NaN: violated)."""
+    for v in (
+        out.cost,
+        out.duration,
+        out.thetadot_minus,
+        out.delta,
+        out.slope_plus,
+        out.speed,
+        out.arm_theta,
+        out.thetadot_plus,
+        out.gain,
+    ):
+        v[b] = math.nan
+
+
 def packed_size(sizes: list[int], block: int) -> int:
     """Length of the constraint vector :func:`pack` makes from groups of these sizes."""
     return sum(-(-k // block) if k > 2 * block else k for k in sizes)
@@ -439,7 +487,7 @@ def allocate_outputs(rows, columns, nodes, order):
 
 
 @_jit
-def evaluate_shapes(P, free, slope_in, thd_in, periodic, common, problem):
+def evaluate_shapes(P, free, slope_in, thd_in, periodic, common, problem, screen):
     """:func:`evaluate_steps` for steps given by their free coefficients ``a_2 .. a_{M-1}``
     (``free``, ``(B, M - 2)``), and :func:`pack`: one compiled call for what an optimiser asks
     of a batch (``periodic``: the periodic gait's, ``thd_in`` ignored).
@@ -451,9 +499,10 @@ def evaluate_shapes(P, free, slope_in, thd_in, periodic, common, problem):
     -, rad, rad, rad/s], ``offsets`` and ``packed`` the constraint layout's offsets and packed
     length. ``slope_in``, ``thd_in``: the start slope and ``theta_dot`` row by row (``(B,)``),
     or empty for ``fixed``'s (the start of a step that follows a step being optimised).
-    ``a_1`` is the one of impact invariance (:func:`controllers.bezier.second_coeff`). Returns
-    ``(a, out, g)``: the coefficients ``(B, M + 1)``, the :class:`StepOutputs` and the packed
-    constraints ``(B, packed)``.
+    ``screen``: :func:`evaluate_steps`'s (``-inf``: every row whole). ``a_1`` is the one of
+    impact invariance (:func:`controllers.bezier.second_coeff`). Returns ``(a, out, g)``: the
+    coefficients ``(B, M + 1)``, the :class:`StepOutputs` and the packed constraints
+    ``(B, packed)``.
     """
     use_ref, shape_ref, cfg, grids, block = common
     fixed, step, ground, col, offsets, packed = problem
@@ -471,7 +520,9 @@ def evaluate_shapes(P, free, slope_in, thd_in, periodic, common, problem):
         a[b, 1] = second_coeff(a0, sl, theta_plus, theta_minus, m)
         thd[b] = thd_in[b] if thd_in.size else thd_plus
     out = allocate_outputs(nb, offsets[-1], grids.nodes.size, m)
-    evaluate_steps(P, a, thd, periodic, use_ref, shape_ref, cfg, step, grids, ground, col, out)
+    evaluate_steps(
+        P, a, thd, periodic, use_ref, shape_ref, cfg, step, grids, ground, col, out, screen
+    )
     g = np.empty((nb, packed))
     pack(out.constraints, offsets, block, g)
     return a, out, g
@@ -482,7 +533,7 @@ def step_values(P, free, common, problem):
     """The cost ``(B,)`` and packed constraints ``(B, packed)`` of :func:`evaluate_shapes` (its
     arguments, the start given by the problem): what each SLSQP evaluation needs, and no more
     crosses back to Python."""
-    _, out, g = evaluate_shapes(P, free, NO_ROWS, NO_ROWS, False, common, problem)
+    _, out, g = evaluate_shapes(P, free, NO_ROWS, NO_ROWS, False, common, problem, -math.inf)
     return out.cost, g
 
 
@@ -490,7 +541,7 @@ def step_values(P, free, common, problem):
 def step_residuals(P, free, common, problem):
     """:func:`step_values` and the cost's terms ``(B, R)`` (:attr:`StepOutputs.residuals`):
     what the Gauss-Newton scaling of a solve needs, without the full evaluation."""
-    _, out, g = evaluate_shapes(P, free, NO_ROWS, NO_ROWS, False, common, problem)
+    _, out, g = evaluate_shapes(P, free, NO_ROWS, NO_ROWS, False, common, problem, -math.inf)
     return out.cost, g, out.residuals
 
 
@@ -526,7 +577,9 @@ def _pair(P, free, n, common, first, second):
     step's by distinct row) and each row's first step among the distinct ones."""
     nb = free.shape[0]
     rows, at = _distinct_rows(free, n)  # at: each row's first step among those evaluated
-    _, o1, g1 = evaluate_shapes(P, free[rows, :n], NO_ROWS, NO_ROWS, False, common, first)
+    _, o1, g1 = evaluate_shapes(
+        P, free[rows, :n], NO_ROWS, NO_ROWS, False, common, first, -math.inf
+    )
     _, o2, g2 = evaluate_shapes(
         P,
         free[:, n:],
@@ -535,6 +588,7 @@ def _pair(P, free, n, common, first, second):
         False,
         common,
         second,
+        -math.inf,
     )
     g = np.empty((nb, g1.shape[1] + g2.shape[1]))
     g[:, : g1.shape[1]] = g1[at]

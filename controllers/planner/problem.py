@@ -315,15 +315,22 @@ class StepEvaluator:
         periodic: bool = False,
         slope: np.ndarray | None = None,
         thetadot_plus: np.ndarray | None = None,
+        screen: float = -math.inf,
     ) -> dict[str, Any]:
         """:meth:`evaluate` for a batch of free-coefficient vectors ``free`` (shape ``(B, k)``);
         every entry of the result has a leading axis of length ``B`` (``groups``: a list of
         ``(B, n_i)`` arrays; ``g``: the packed constraint vectors). ``slope`` and
         ``thetadot_plus`` (shape ``(B,)``) override ``fx.slope`` and ``fx.thetadot_plus`` row by
-        row (the start of a step that follows a step being optimised)."""
+        row (the start of a step that follows a step being optimised).
+
+        ``screen``: for a caller that wants only the feasible rows (every constraint ``>=
+        screen``): a row whose dynamics already break a constraint below ``screen`` is not
+        evaluated further (:func:`kernel.evaluate_steps`); its constraints not reached are NaN
+        (``g``: ``-1e3``) and its scalar outputs NaN. The feasible rows are the same, to the
+        last bit, as without it."""
         with np.errstate(all="ignore"):
             return self._evaluate(
-                fx, np.asarray(free, dtype=np.float64), periodic, slope, thetadot_plus
+                fx, np.asarray(free, dtype=np.float64), periodic, slope, thetadot_plus, screen
             )
 
     def step_values(self, fx: FixedStep, free: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -458,7 +465,7 @@ class StepEvaluator:
         self._problems[key] = (fx, self.ref, data)
         return data
 
-    def _evaluate(self, fx, free, periodic, slope_in, thd_in) -> dict[str, Any]:
+    def _evaluate(self, fx, free, periodic, slope_in, thd_in, screen) -> dict[str, Any]:
         free = self._free(free)
         layout, shape_ref, problem = self._problem_data(fx, periodic)
         if periodic:  # a_1 gives the step's own post-impact slope (a period-one gait)
@@ -479,6 +486,7 @@ class StepEvaluator:
             periodic,
             self._common(shape_ref),
             problem,
+            float(screen),
         )
         return {
             "a": a,

@@ -88,6 +88,38 @@ def test_the_compiled_values_are_the_full_evaluations_numbers(planners):
         sm.step_values(fx, x)  # a pair's coefficients for one step
 
 
+def test_the_screen_skips_only_infeasible_rows_and_keeps_the_feasible_ones_bit_for_bit(planners):
+    """With ``screen`` (the beam search's), a row whose dynamics break a constraint below it is
+    left early: it is infeasible in the full evaluation too, and its scalar outputs are NaN;
+    every row feasible at that threshold is the same, to the last bit, in every output."""
+    from controllers.planner.beam import beam_shapes
+
+    sm, fx, st = gait_step(planners["paper"], CASES["paper"]["blocks_high"])
+    near, far = beam_shapes(sm.cfg.order)
+    chord = fx.a_last - fx.a0
+    base = st.coeffs[2:-1]  # the gait's shape
+    X = np.vstack([base, base + chord * near, base + chord * far])
+    screen = -1e-7
+    full = sm.evaluate_batch(fx, X)
+    cut = sm.evaluate_batch(fx, X, screen=screen)
+    feasible = np.min(full["g"], axis=1) >= screen
+    skipped = np.isnan(cut["cost"])
+    assert 0 < feasible.sum() < X.shape[0] and skipped.sum() > X.shape[0] // 2
+    assert not np.any(feasible & skipped)
+    assert np.array_equal(np.min(cut["g"], axis=1) >= screen, feasible)
+    for key, v in full.items():
+        if key == "groups":
+            for a, b in zip(v, cut[key]):
+                assert np.array_equal(a[feasible], b[feasible], equal_nan=True)
+        else:
+            a, b = np.asarray(v)[feasible], np.asarray(cut[key])[feasible]
+            assert np.array_equal(a, b, equal_nan=True), key
+    # rows not skipped are evaluated whole, feasible or not
+    kept = ~skipped
+    assert np.array_equal(full["g"][kept], cut["g"][kept], equal_nan=True)
+    assert np.isnan(cut["thetadot_minus"][skipped]).all()
+
+
 def test_the_compiled_residuals_are_the_full_evaluations_terms(planners):
     """The cost terms of the Gauss-Newton scaling from the compiled calls (a step; a pair, the
     first step's terms then the second's) are, bit for bit, the full evaluations', and so are
