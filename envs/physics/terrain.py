@@ -62,6 +62,38 @@ def terrain_height(tx, ty, n, x):
 
     On a vertical face (``x`` equal to the abscissa of the face) the upper height is returned.
     """
+    if n == 1 or x <= tx[0] or x >= tx[n - 1]:
+        return _height_on_segment(tx, ty, n, x, 0)
+    lo, hi = 0, n - 1  # invariant: tx[lo] <= x < tx[hi]
+    while hi - lo > 1:
+        mid = (lo + hi) >> 1
+        if tx[mid] <= x:
+            lo = mid
+        else:
+            hi = mid
+    return _height_on_segment(tx, ty, n, x, lo)
+
+
+@njit(cache=True, error_model="numpy")
+def terrain_height_near(tx, ty, n, x, hint):
+    """:func:`terrain_height` [m] at ``x`` [m], searching the polyline's segment from the vertex
+    ``hint`` (the segment of a nearby point: a few steps instead of a bisection); returns the
+    height and the vertex to hint the next point with. The same number as
+    :func:`terrain_height`, whatever the hint. Scalars only."""
+    if n == 1 or x <= tx[0] or x >= tx[n - 1]:
+        return _height_on_segment(tx, ty, n, x, 0), 0
+    lo = min(max(hint, 0), n - 2)
+    while lo > 0 and tx[lo] > x:
+        lo -= 1
+    while tx[lo + 1] <= x:  # ends: x < tx[n - 1]
+        lo += 1
+    return _height_on_segment(tx, ty, n, x, lo), lo
+
+
+@njit(cache=True, error_model="numpy")
+def _height_on_segment(tx, ty, n, x, lo):
+    """:func:`terrain_height` at ``x`` [m] given ``lo``, the last vertex with ``tx[lo] <= x``
+    (ignored outside the polyline, which extends its end segments)."""
     if n == 1:
         return ty[0]
     if x <= tx[0]:
@@ -72,13 +104,7 @@ def terrain_height(tx, ty, n, x):
         if tx[n - 1] > tx[n - 2]:
             return ty[n - 1] + (ty[n - 1] - ty[n - 2]) / (tx[n - 1] - tx[n - 2]) * (x - tx[n - 1])
         return ty[n - 1] if x > tx[n - 1] else max(ty[n - 1], ty[n - 2])
-    lo, hi = 0, n - 1  # invariant: tx[lo] <= x < tx[hi]
-    while hi - lo > 1:
-        mid = (lo + hi) >> 1
-        if tx[mid] <= x:
-            lo = mid
-        else:
-            hi = mid
+    hi = lo + 1
     if tx[lo] == x:
         h = ty[lo]
         k = lo - 1
