@@ -26,7 +26,7 @@ from numba import njit
 
 from envs.physics import model
 from envs.physics.params import PL
-from envs.physics.terrain import terrain_height_near
+from envs.physics.terrain import terrain_height_near, terrain_segment
 
 from .. import reduced as rd
 from ..bezier import bezier_on_basis, chord_coefficients, second_coeff
@@ -232,6 +232,7 @@ def evaluate_steps(
     fyr = np.empty(nk)
     ahead = np.empty(nk)
     fk = np.empty(nk)
+    seg0 = terrain_segment(tx, nt, xs)  # the ground's segment under the stance foot
     for b in range(nb):
         # constraint and its phase derivatives on the nodes
         bezier_on_basis(a[b], B0, ph)
@@ -307,7 +308,7 @@ def evaluate_steps(
         # swing foot on the check grid, full length and retracted
         i_arm = -1
         bezier_on_basis(a[b], Bg, phg)
-        near_f = near_r = 0  # the terrain segments under the feet (hints for the next point)
+        near_f = near_r = seg0  # the terrain segments under the feet (hints for the next point)
         for k in range(nk):
             thg = rd.phase_at(th0, span, sg[k])
             x, y, xr, yr = model.swing_foot_positions(P, phg[k], thg, xs, ys, ret)

@@ -62,8 +62,15 @@ def terrain_height(tx, ty, n, x):
 
     On a vertical face (``x`` equal to the abscissa of the face) the upper height is returned.
     """
+    return _height_on_segment(tx, ty, n, x, terrain_segment(tx, n, x))
+
+
+@njit(cache=True, error_model="numpy")
+def terrain_segment(tx, n, x):
+    """The last vertex ``lo`` of the polyline ``tx[:n]`` [m] with ``tx[lo] <= x`` [m], found by
+    bisection (0 outside the polyline or for a single vertex). Scalars only."""
     if n == 1 or x <= tx[0] or x >= tx[n - 1]:
-        return _height_on_segment(tx, ty, n, x, 0)
+        return 0
     lo, hi = 0, n - 1  # invariant: tx[lo] <= x < tx[hi]
     while hi - lo > 1:
         mid = (lo + hi) >> 1
@@ -71,15 +78,17 @@ def terrain_height(tx, ty, n, x):
             lo = mid
         else:
             hi = mid
-    return _height_on_segment(tx, ty, n, x, lo)
+    return lo
 
 
-@njit(cache=True, error_model="numpy")
+# inlined where called: a call of a compiled function that takes arrays costs about 50 ns,
+# several times the walk (the planner calls it for every point of its check grids)
+@njit(cache=True, error_model="numpy", inline="always")
 def terrain_height_near(tx, ty, n, x, hint):
-    """:func:`terrain_height` [m] at ``x`` [m], searching the polyline's segment from the vertex
-    ``hint`` (the segment of a nearby point: a few steps instead of a bisection); returns the
-    height and the vertex to hint the next point with. The same number as
-    :func:`terrain_height`, whatever the hint. Scalars only."""
+    """:func:`terrain_height` [m] at ``x`` [m], walking to the polyline's segment from the vertex
+    ``hint`` (:func:`terrain_segment` of a nearby point: a step or two instead of a bisection);
+    returns the height and the vertex to hint the next point with. The same number as
+    :func:`terrain_height`, whatever the hint (a far one costs a long walk). Scalars only."""
     if n == 1 or x <= tx[0] or x >= tx[n - 1]:
         return _height_on_segment(tx, ty, n, x, 0), 0
     lo = min(max(hint, 0), n - 2)
@@ -90,7 +99,7 @@ def terrain_height_near(tx, ty, n, x, hint):
     return _height_on_segment(tx, ty, n, x, lo), lo
 
 
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, error_model="numpy", inline="always")
 def _height_on_segment(tx, ty, n, x, lo):
     """:func:`terrain_height` at ``x`` [m] given ``lo``, the last vertex with ``tx[lo] <= x``
     (ignored outside the polyline, which extends its end segments)."""
