@@ -311,7 +311,8 @@ def evaluate_steps(
         near_f = near_r = seg0  # the terrain segments under the feet (hints for the next point)
         for k in range(nk):
             thg = rd.phase_at(th0, span, sg[k])
-            x, y, xr, yr = model.swing_foot_positions(P, phg[k], thg, xs, ys, ret)
+            x, y = model.swing_foot_position(P, phg[k], thg, xs, ys, 0.0)
+            xr, yr = model.swing_foot_position(P, phg[k], thg, xs, ys, ret)
             fxf[k] = x
             fyf[k] = y
             h, near_f = terrain_height_near(tx, ty, nt, x, near_f)

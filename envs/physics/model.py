@@ -244,18 +244,6 @@ def swing_foot_position(P, q1, q2, xs, ys, retract=0.0):
 
 
 @_jit
-def swing_foot_positions(P, q1, q2, xs, ys, retract):
-    """:func:`swing_foot_position` at full length and with ``retract`` [m], ``(x, y, x_r,
-    y_r)`` [m], from one evaluation of the angles' sines and cosines (the same numbers as two
-    calls). Scalars only."""
-    l = P[PL]  # noqa: E741
-    hx, hy = hip_position(P, q1, q2, xs, ys)
-    s = q2 - q1
-    sn, cs = np.sin(s), np.cos(s)
-    return hx - l * sn, hy - l * cs, hx - (l - retract) * sn, hy - (l - retract) * cs
-
-
-@_jit
 def touchdown_configuration(dx, dh, l):
     """Pre-impact ``(q1, q2)`` [rad] that puts the swing foot at ``(dx, dh)`` [m] from the
     stance foot with both legs at full length ``l`` [m] (the inverse of

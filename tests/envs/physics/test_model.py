@@ -180,14 +180,3 @@ def test_weight_is_the_gravitational_mass_times_g():
     assert model.weight(P) == (2 * params.m + params.mHg) * params.g
     # the swing-phase ground reaction carries the weight at rest
     assert model.ground_reaction(P, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0)[1] == model.weight(P)
-
-
-def test_both_swing_foot_positions_from_one_evaluation_are_two_calls_numbers():
-    """The planner's full-length and retracted swing foot from one evaluation of the angles are,
-    to the last bit, two calls of :func:`model.swing_foot_position`."""
-    P = RobotParams.from_preset("paper").vector()
-    rng = np.random.default_rng(1)
-    for q1, q2, xs, ys, r in rng.uniform([-1, -1, -2, -0.1, 0], [1, 1, 2, 0.1, 0.1], (200, 5)):
-        both = model.swing_foot_positions(P, q1, q2, xs, ys, r)
-        assert both[:2] == model.swing_foot_position(P, q1, q2, xs, ys, 0.0)
-        assert both[2:] == model.swing_foot_position(P, q1, q2, xs, ys, r)
