@@ -23,7 +23,7 @@ from numba import njit
 
 from envs.physics import model
 from envs.physics.model import touchdown_configuration
-from envs.physics.terrain import Terrain, as_terrain, terrain_height_near, terrain_segment
+from envs.physics.terrain import Terrain, as_terrain, terrain_height
 
 __all__ = [
     "FootholdChains",
@@ -450,10 +450,9 @@ def _foothold_table(
     # the faces with x0 <= x <= reach (the faces come in order of x)
     f0 = np.searchsorted(faces[:, 0], x0, side="left")
     f1 = np.searchsorted(faces[:, 0], reach, side="right")
-    seg = terrain_segment(tx, nt, x0 + step_min)
     for k in range(n):
         xk = x0 + step_min + res * k
-        yk, seg = terrain_height_near(tx, ty, nt, xk, seg)
+        yk = terrain_height(tx, ty, nt, xk)
         d = yk - y0
         x[k], y[k], dh[k] = xk, yk, d
         # distance to the nearest face or kink

@@ -26,7 +26,7 @@ from numba import njit
 
 from envs.physics import model
 from envs.physics.params import PL
-from envs.physics.terrain import terrain_height_near, terrain_segment
+from envs.physics.terrain import terrain_height
 
 from .. import reduced as rd
 from ..bezier import bezier_on_basis, chord_coefficients, second_coeff
@@ -232,7 +232,6 @@ def evaluate_steps(
     fyr = np.empty(nk)
     ahead = np.empty(nk)
     fk = np.empty(nk)
-    seg0 = terrain_segment(tx, nt, xs)  # the ground's segment under the stance foot
     for b in range(nb):
         # constraint and its phase derivatives on the nodes
         bezier_on_basis(a[b], B0, ph)
@@ -308,19 +307,16 @@ def evaluate_steps(
         # swing foot on the check grid, full length and retracted
         i_arm = -1
         bezier_on_basis(a[b], Bg, phg)
-        near_f = near_r = seg0  # the terrain segments under the feet (hints for the next point)
         for k in range(nk):
             thg = rd.phase_at(th0, span, sg[k])
             x, y = model.swing_foot_position(P, phg[k], thg, xs, ys, 0.0)
-            xr, yr = model.swing_foot_position(P, phg[k], thg, xs, ys, ret)
             fxf[k] = x
             fyf[k] = y
-            h, near_f = terrain_height_near(tx, ty, nt, x, near_f)
-            cfull[k] = y - h
-            fxr[k] = xr
-            fyr[k] = yr
-            h, near_r = terrain_height_near(tx, ty, nt, xr, near_r)
-            cret[k] = yr - h
+            cfull[k] = y - terrain_height(tx, ty, nt, x)
+            x, y = model.swing_foot_position(P, phg[k], thg, xs, ys, ret)
+            fxr[k] = x
+            fyr[k] = y
+            cret[k] = y - terrain_height(tx, ty, nt, x)
             ahead[k] = fxf[k] - xs - arm
             if i_arm < 0 and ahead[k] >= 0.0:
                 i_arm = k

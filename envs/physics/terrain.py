@@ -62,47 +62,6 @@ def terrain_height(tx, ty, n, x):
 
     On a vertical face (``x`` equal to the abscissa of the face) the upper height is returned.
     """
-    return _height_on_segment(tx, ty, n, x, terrain_segment(tx, n, x))
-
-
-@njit(cache=True, error_model="numpy")
-def terrain_segment(tx, n, x):
-    """The last vertex ``lo`` of the polyline ``tx[:n]`` [m] with ``tx[lo] <= x`` [m], found by
-    bisection (0 outside the polyline or for a single vertex). Scalars only."""
-    if n == 1 or x <= tx[0] or x >= tx[n - 1]:
-        return 0
-    lo, hi = 0, n - 1  # invariant: tx[lo] <= x < tx[hi]
-    while hi - lo > 1:
-        mid = (lo + hi) >> 1
-        if tx[mid] <= x:
-            lo = mid
-        else:
-            hi = mid
-    return lo
-
-
-# inlined where called: a call of a compiled function that takes arrays costs about 50 ns,
-# several times the walk (the planner calls it for every point of its check grids)
-@njit(cache=True, error_model="numpy", inline="always")
-def terrain_height_near(tx, ty, n, x, hint):
-    """:func:`terrain_height` [m] at ``x`` [m], walking to the polyline's segment from the vertex
-    ``hint`` (:func:`terrain_segment` of a nearby point: a step or two instead of a bisection);
-    returns the height and the vertex to hint the next point with. The same number as
-    :func:`terrain_height`, whatever the hint (a far one costs a long walk). Scalars only."""
-    if n == 1 or x <= tx[0] or x >= tx[n - 1]:
-        return _height_on_segment(tx, ty, n, x, 0), 0
-    lo = min(max(hint, 0), n - 2)
-    while lo > 0 and tx[lo] > x:
-        lo -= 1
-    while tx[lo + 1] <= x:  # ends: x < tx[n - 1]
-        lo += 1
-    return _height_on_segment(tx, ty, n, x, lo), lo
-
-
-@njit(cache=True, error_model="numpy", inline="always")
-def _height_on_segment(tx, ty, n, x, lo):
-    """:func:`terrain_height` at ``x`` [m] given ``lo``, the last vertex with ``tx[lo] <= x``
-    (ignored outside the polyline, which extends its end segments)."""
     if n == 1:
         return ty[0]
     if x <= tx[0]:
@@ -113,7 +72,13 @@ def _height_on_segment(tx, ty, n, x, lo):
         if tx[n - 1] > tx[n - 2]:
             return ty[n - 1] + (ty[n - 1] - ty[n - 2]) / (tx[n - 1] - tx[n - 2]) * (x - tx[n - 1])
         return ty[n - 1] if x > tx[n - 1] else max(ty[n - 1], ty[n - 2])
-    hi = lo + 1
+    lo, hi = 0, n - 1  # invariant: tx[lo] <= x < tx[hi]
+    while hi - lo > 1:
+        mid = (lo + hi) >> 1
+        if tx[mid] <= x:
+            lo = mid
+        else:
+            hi = mid
     if tx[lo] == x:
         h = ty[lo]
         k = lo - 1

@@ -12,7 +12,6 @@ from envs.physics.terrain import (
     as_terrain,
     available_terrains,
     terrain_height,
-    terrain_height_near,
     terrain_spec,
 )
 
@@ -160,26 +159,3 @@ def test_an_unknown_name_lists_what_is_allowed(name):
         assert allowed in str(err.value)
     with pytest.raises(ValueError, match="must be a Terrain"):
         terrain_spec(3.0)
-
-
-@pytest.mark.parametrize("terrain", ALL_KINDS, ids=lambda t: t.kind)
-def test_the_height_searched_from_a_hint_is_the_bisections_whatever_the_hint(terrain):
-    """The planner's walk from a nearby segment gives the same height, to the last bit, as the
-    bisection: between vertices, on vertices and vertical faces (the upper height), beyond both
-    ends; and its hint for the next point is the segment under this one."""
-    xs, ys = terrain.arrays()
-    n = xs.size
-    rng = np.random.default_rng(0)
-    x = np.concatenate(
-        [rng.uniform(xs[0] - 0.5, xs[-1] + 0.5, 400), xs, [xs[0] - 1.0, xs[-1] + 1.0]]
-    )
-    for hint in (0, n // 2, n - 1, -5, n + 5):
-        for xi in x:
-            h, seg = terrain_height_near(xs, ys, n, xi, hint)
-            assert h == terrain_height(xs, ys, n, xi)
-            if xs[0] < xi < xs[-1]:
-                assert xs[seg] <= xi < xs[seg + 1]
-    near = 0  # walking along the course, each point hinting the next
-    for xi in np.sort(x):
-        h, near = terrain_height_near(xs, ys, n, xi, near)
-        assert h == terrain_height(xs, ys, n, xi)
