@@ -260,15 +260,15 @@ def evaluate_steps(
         fmin = step.fmin if periodic else max(step.fmin, (cfg.dip_floor * thp) ** 2)
         rd.grid_step_time(F[b], qint, half, lo, thd, tcum)
         T = tcum[nn - 1]
-        if screen > -math.inf:
-            low = min(
-                (T - cfg.duration_min) / cfg.duration_min, (cfg.duration_max - T) / cfg.duration_min
-            )
-            for k in range(nn):
-                low = min(low, (F[b, k] - fmin) / (thd_ref * thd_ref))
-            if low < screen:
-                _screened(out, b)
-                continue
+        G[b, col.duration] = (T - cfg.duration_min) / cfg.duration_min
+        G[b, col.duration + 1] = (cfg.duration_max - T) / cfg.duration_min
+        for k in range(nn):
+            G[b, col.thetadot_sq + k] = (F[b, k] - fmin) / (thd_ref * thd_ref)
+        if screen > -math.inf and (
+            _below(G[b], col.duration, 2, screen) or _below(G[b], col.thetadot_sq, nn, screen)
+        ):
+            _screened(out, b)
+            continue
         # nominal input and stance-foot reaction along the motion
         cut = False
         for k in range(nn):
@@ -280,7 +280,6 @@ def evaluate_steps(
             fn, ft = model.stance_reaction(
                 P, ph[k], th[k], dph[k] * thd[k], thd[k], q1dd, q2dd, nx, ny
             )
-            G[b, col.thetadot_sq + k] = (F[b, k] - fmin) / (thd_ref * thd_ref)
             G[b, col.alpha + k] = al[k] / cfg.alpha_scale - 0.05
             G[b, col.torque + k] = (cfg.u_lim - abs(u)) / cfg.u_max
             G[b, col.stance_reaction + k] = fn / weight
@@ -360,8 +359,6 @@ def evaluate_steps(
         e = nn - 1
         vx1, vy1 = model.swing_foot_velocity(P, ph[e], th[e], dph[e], 1.0)
         G[b, col.touchdown] = (-(vy1 - sl * vx1) - cfg.touchdown_slope) / l
-        G[b, col.duration] = (T - cfg.duration_min) / cfg.duration_min
-        G[b, col.duration + 1] = (cfg.duration_max - T) / cfg.duration_min
         # impact: impulse into the ground within the cone, trailing foot leaves the ground
         q1m, q2m, w1m, w2m = ph[e], th[e], dph[e] * thd[e], thd[e]
         q1p, q2p, w1p, w2p = model.impact(P, q1m, q2m, w1m, w2m)
@@ -412,6 +409,15 @@ def evaluate_steps(
         out.arm_theta[b] = rd.phase_at(th0, span, s_cross) if i_arm >= 0 else math.nan
         out.thetadot_plus[b] = thp
         out.gain[b] = gain
+
+
+@_jit
+def _below(row, start, count, screen):
+    """Whether one of ``row[start : start + count]`` is below ``screen`` (NaN is not)."""
+    for i in range(start, start + count):
+        if row[i] < screen:
+            return True
+    return False
 
 
 @_jit
