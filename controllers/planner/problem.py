@@ -590,7 +590,10 @@ class BatchProblem:
     evaluated in one batched call (the same derivatives SLSQP would take by itself, at a
     fraction of the cost). With a :class:`SearchBudget` every point evaluated is accounted,
     once; once it is spent, any further evaluation raises :class:`BudgetExhausted` (a payload
-    asked for at a point already evaluated is not accounted again). ``residuals(payload)``
+    asked for at a point already evaluated is not accounted again). :meth:`minimize` accounts
+    each new iterate with its forward-difference points, evaluated with it or when their
+    Jacobian is asked for (a trial point of a line search, which SLSQP seldom accepts): the
+    budget's accounts, and so the searches, are the same either way. ``residuals(payload)``
     (optional) gives the cost's terms of a batch, ``(B, R)`` with ``cost = sum(r^2)`` row by
     row: the Gauss-Newton model of :meth:`minimize` with ``scaled``. ``residual_values(X)``
     (optional) returns ``(cost, g, R)``, the same numbers without the payload: then the model
@@ -615,6 +618,8 @@ class BatchProblem:
         self._jac: dict[bytes, tuple[np.ndarray, np.ndarray]] = {}
         # forward-difference batches evaluated whole: (points, costs, constraints) by point
         self._points: dict[bytes, tuple[np.ndarray, np.ndarray, np.ndarray]] = {}
+        # points accounted in the budget but not evaluated yet (forward differences put off)
+        self._charged: set[bytes] = set()
 
     def _fill(self, X: np.ndarray, payload: bool = False) -> tuple[np.ndarray, np.ndarray] | None:
         """Evaluate the rows of ``X`` not evaluated yet (with ``payload``, also the payload of
@@ -645,8 +650,10 @@ class BatchProblem:
         """The positions of the points ``keys`` not evaluated yet, accounted in the budget
         (which raises :class:`BudgetExhausted` once spent) before they are evaluated."""
         todo = [i for i, k in enumerate(keys) if k not in self.cache]
-        if todo and self.budget is not None:
-            self.budget.spend(len(todo))
+        due = sum(keys[i] not in self._charged for i in todo)
+        if due and self.budget is not None:
+            self.budget.spend(due)
+        self._charged.difference_update(keys[i] for i in todo)
         return todo
 
     def get(self, x: np.ndarray) -> tuple[float, np.ndarray, Any, int]:
@@ -696,17 +703,26 @@ class BatchProblem:
         self._jac[key] = dc, dg
         return dc, dg
 
-    def _with_jacobian_points(self, x: np.ndarray) -> tuple[float, np.ndarray, Any, int]:
-        """:meth:`get`, evaluating the forward-difference points around ``x`` in the same
-        batched call (along a converging run SLSQP asks for the Jacobians at every point it
-        evaluates, and a batch costs little more than a single point)."""
+    def _with_jacobian_points(
+        self, x: np.ndarray, eager: bool = True
+    ) -> tuple[float, np.ndarray, Any, int]:
+        """:meth:`get`, accounting the forward-difference points around ``x`` with it; with
+        ``eager``, evaluating them in the same batched call (SLSQP asks for the Jacobians at
+        the points it accepts, and a batch costs about two single points), else when
+        :meth:`_jacobians` asks for them."""
         x = np.ascontiguousarray(x, dtype=np.float64)
         key = x.tobytes()
         if key not in self.cache:
             X = _fd_points(x)
-            fresh = self._fill(X)
-            if fresh is not None:
-                self._points[key] = (X, *fresh)
+            if eager:
+                fresh = self._fill(X)
+                if fresh is not None:
+                    self._points[key] = (X, *fresh)
+            else:
+                keys = [r.tobytes() for r in X]
+                todo = self._accounted(keys)
+                self._charged.update(keys[i] for i in todo)
+                self._fill(X[:1])
         return self.cache[key]
 
     def scaling(self, x0: np.ndarray) -> np.ndarray | None:
@@ -768,21 +784,28 @@ class BatchProblem:
                 and min(hist[-w:]) > _STALL_GAIN * min(hist[:-w])
             )
 
+        # SLSQP accepts most first points after a Jacobian (its full step) and few of the
+        # line search's shorter ones: their forward differences wait until asked for
+        first = [True]
+
         def fun(x: np.ndarray) -> tuple[float, np.ndarray]:
-            c, g, _, _ = self._with_jacobian_points(x)
+            c, g, _, _ = self._with_jacobian_points(x, eager=first[0])
+            first[0] = False
             return c, g
 
+        def jac(x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+            first[0] = True
+            return self._jacobians(x)
+
         if T is None:
-            return minimize_slsqp(
-                fun, self._jacobians, x0, maxiter, ftol, stalled if stall else None
-            )
+            return minimize_slsqp(fun, jac, x0, maxiter, ftol, stalled if stall else None)
         xs = np.array(x0, dtype=np.float64)
 
         def fun_z(z: np.ndarray) -> tuple[float, np.ndarray]:
             return fun(xs + T @ z)
 
         def jac_z(z: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-            dc, dg = self._jacobians(xs + T @ z)
+            dc, dg = jac(xs + T @ z)
             return T.T @ dc, dg @ T
 
         def stalled_z(z: np.ndarray) -> bool:

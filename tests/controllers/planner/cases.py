@@ -2,7 +2,7 @@
 
 from configs import CONFIG_DIR
 from controllers.planner import TerrainMap
-from controllers.planner.problem import FixedStep, StepEvaluator, gait_reference
+from controllers.planner.problem import FixedStep, SearchBudget, StepEvaluator, gait_reference
 from envs.physics.terrain import Terrain
 
 PAPER_STAIRS = Terrain.from_yaml(CONFIG_DIR / "terrains" / "paper_stairs.yaml")
@@ -51,3 +51,15 @@ def gait_step(planner, terrain, stance=(0.25, 0.0), length=None, rise=0.0, ref=T
         st.coeffs[-1],
     )
     return sm, fx, st
+
+
+class RecordedBudget(SearchBudget):
+    """A :class:`SearchBudget` that records each ``spend``: ``(used before, n)``."""
+
+    def __init__(self, evaluations: int):
+        super().__init__(evaluations)
+        self.spent: list[tuple[int, int]] = []
+
+    def spend(self, n: int) -> None:
+        self.spent.append((self.used, n))
+        super().spend(n)

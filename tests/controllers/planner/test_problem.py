@@ -20,7 +20,7 @@ from controllers.planner.problem import (
     worst_violation,
 )
 
-from .cases import CASES, gait_step
+from .cases import CASES, RecordedBudget, gait_step
 
 
 def test_batched_step_evaluation_matches_single_points(planners):
@@ -175,6 +175,46 @@ def test_an_optimisation_on_the_compiled_values_is_the_one_on_full_evaluations(p
     (x1, u1, c1, g1), (x2, u2, c2, g2) = runs
     assert np.array_equal(x1, x2) and u1 == u2 > 0 and c1 == c2
     assert np.array_equal(g1, g2, equal_nan=True)
+
+
+class _EagerProblem(BatchProblem):
+    """:class:`BatchProblem` evaluating every iterate's forward differences with it."""
+
+    def _with_jacobian_points(self, x, eager=True):
+        return super()._with_jacobian_points(x, eager=True)
+
+
+@pytest.mark.parametrize("scaled", [False, True])
+def test_put_off_forward_differences_change_the_cost_not_the_solve(planners, scaled):
+    """SLSQP on a pair: putting off the forward differences of the points it may reject gives
+    the same final points and the same budget spent, call by call, and evaluates no more rows
+    (fewer where a line search shortens a step: ``test_slsqp.py``)."""
+    sm, fx, fx2, x = _pair(planners)
+    runs = []
+    for cls in (_EagerProblem, BatchProblem):
+        budget, rows = RecordedBudget(10**6), [0]
+
+        def values(X, rows=rows):
+            rows[0] += X.shape[0]
+            return sm.pair_values(fx, fx2, X)
+
+        def residual_values(X):
+            return sm.pair_residuals(fx, fx2, X)
+
+        finals = []
+        for x0 in x:
+            prob = cls(
+                lambda X: _pair_batch(sm, fx, fx2, X),
+                budget,
+                lambda ev: np.concatenate([ev["residuals"], ev["next_residuals"]], axis=1),
+                values,
+                residual_values,
+            )
+            finals.append(prob.minimize(x0, 30, 1e-7, scaled=scaled))
+        runs.append((np.array(finals), budget.spent, rows[0]))
+    (x1, s1, r1), (x2, s2, r2) = runs
+    assert x1.tobytes() == x2.tobytes() and s1 == s2 and len(s1) > 0
+    assert r2 <= r1
 
 
 @pytest.mark.parametrize("periodic", [False, True])

@@ -9,7 +9,7 @@ from controllers.planner import slsqp
 from controllers.planner.problem import BatchProblem
 from controllers.planner.slsqp import minimize_slsqp
 
-from .cases import CASES, gait_step
+from .cases import CASES, RecordedBudget, gait_step
 
 
 class _Recorder:
@@ -139,3 +139,33 @@ def test_a_step_problem_solves_as_scipy_solves_it(planners):
     assert list(direct.cache) == list(ref.cache)  # the same points, in the same order
     assert np.min(direct.get(xd)[1]) >= -1e-7  # feasible
     assert not np.allclose(xd, x0)  # it did move
+
+
+def test_points_a_line_search_rejects_cost_one_row_and_the_same_budget():
+    """:meth:`BatchProblem.minimize` evaluates the forward differences of a line search's
+    shorter steps only if SLSQP accepts the point: on Rosenbrock's function, whose line
+    searches shorten steps, fewer rows than with every iterate's batch evaluated whole, the
+    same final point, and the budget spent in the same amounts at the same moments."""
+
+    def rosenbrock(X):
+        c = np.sum(100.0 * (X[:, 1:] - X[:, :-1] ** 2) ** 2 + (1.0 - X[:, :-1]) ** 2, axis=1)
+        g = np.stack([1.5 - np.sum(X * X, axis=1), X[:, 0] - 0.1 * X[:, -1]], axis=1)
+        return c, g, None
+
+    class Eager(BatchProblem):
+        def _with_jacobian_points(self, x, eager=True):
+            return super()._with_jacobian_points(x, eager=True)
+
+    runs = []
+    for cls in (Eager, BatchProblem):
+        budget, rows = RecordedBudget(10**6), [0]
+
+        def fn(X, rows=rows):
+            rows[0] += X.shape[0]
+            return rosenbrock(X)
+
+        x = cls(fn, budget).minimize(np.array([-1.2, 1.0, 0.3]), 100, 1e-10)
+        runs.append((x, budget.spent, rows[0]))
+    (x1, s1, r1), (x2, s2, r2) = runs
+    assert x1.tobytes() == x2.tobytes() and s1 == s2
+    assert r2 < r1 and budget.used == r1  # the eager run evaluates every row it accounts
