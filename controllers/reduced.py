@@ -185,14 +185,34 @@ class ChebyshevSeries:
         return (2.0 * t - self.theta_a - self.theta_b) / (self.theta_b - self.theta_a)
 
     def __call__(self, theta: np.ndarray | float) -> np.ndarray | float:
-        out = cheb.chebval(self._x(theta), self.coef)
-        return float(out) if np.ndim(out) == 0 else out
+        return _series_at(self._x(theta), self.coef)
 
     def derivative(self, theta: np.ndarray | float) -> np.ndarray | float:
         """``d/dtheta`` of the interpolant."""
         dc = cheb.chebder(self.coef) * 2.0 / (self.theta_b - self.theta_a)
-        out = cheb.chebval(self._x(theta), dc)
-        return float(out) if np.ndim(out) == 0 else out
+        return _series_at(self._x(theta), dc)
+
+
+def _series_at(x: np.ndarray, coef: np.ndarray) -> np.ndarray | float:
+    """The Chebyshev series ``coef`` at ``x`` (a float where ``x`` is a scalar)."""
+    out = _clenshaw(np.ravel(x), np.ascontiguousarray(coef, dtype=np.float64))
+    return float(out[0]) if np.ndim(x) == 0 else out.reshape(np.shape(x))
+
+
+@_jit
+def _clenshaw(x, c):
+    """``numpy.polynomial.chebyshev.chebval(x, c)`` for 1-d ``x`` and ``c`` (at least two
+    coefficients), by its recurrence in its order: the same numbers, without its per-term
+    array operations."""
+    n = c.size
+    out = np.empty(x.size)
+    for j in range(x.size):
+        x2 = 2.0 * x[j]
+        c0, c1 = c[n - 2], c[n - 1]
+        for i in range(3, n + 1):
+            c0, c1 = c[n - i] - c1, c0 + c1 * x2
+        out[j] = c0 + c1 * x[j]
+    return out
 
 
 # ---------------------------------------------------------------------------- reduced dynamics

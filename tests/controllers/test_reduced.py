@@ -112,6 +112,27 @@ def test_chebyshev_series_interpolates_smooth_functions():
     np.testing.assert_allclose(ci, np.sin(th) - np.sin(-0.3), atol=1e-14)
 
 
+def test_the_series_is_numpys_chebval_bit_for_bit():
+    """The compiled recurrence evaluates a series as ``numpy``'s ``chebval`` does, to the last
+    bit, at a scalar (a float) and at arrays of any shape, and so does its derivative."""
+    from numpy.polynomial import chebyshev as cheb
+
+    rng = np.random.default_rng(4)
+    for n in (4, 16, 48):
+        s = rd.ChebyshevSeries(rng.standard_normal(n + 1), -0.3, 0.4)
+        dc = cheb.chebder(s.coef) * 2.0 / (s.theta_b - s.theta_a)
+        for theta in (0.1, rng.uniform(-0.32, 0.42, 7), rng.uniform(-0.3, 0.4, (3, 5))):
+            x = s._x(theta)
+            for got, want in (
+                (s(theta), cheb.chebval(x, s.coef)),
+                (s.derivative(theta), cheb.chebval(x, dc)),
+            ):
+                if np.ndim(theta) == 0:
+                    assert isinstance(got, float) and got == float(want)
+                else:
+                    assert got.shape == want.shape and got.tobytes() == want.tobytes()
+
+
 def test_bad_grid_and_nonpositive_speed_raise():
     with pytest.raises(ValueError, match="grid size"):
         rd.cheb_nodes(2)
