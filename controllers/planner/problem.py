@@ -648,7 +648,8 @@ class BatchProblem:
 
     def _accounted(self, keys: list[bytes]) -> list[int]:
         """The positions of the points ``keys`` not evaluated yet, accounted in the budget
-        (which raises :class:`BudgetExhausted` once spent) before they are evaluated."""
+        (which raises :class:`BudgetExhausted` once spent) before they are evaluated, but for
+        those accounted already (forward differences put off)."""
         todo = [i for i, k in enumerate(keys) if k not in self.cache]
         due = sum(keys[i] not in self._charged for i in todo)
         if due and self.budget is not None:
@@ -718,10 +719,9 @@ class BatchProblem:
                 fresh = self._fill(X)
                 if fresh is not None:
                     self._points[key] = (X, *fresh)
-            else:
+            else:  # all accounted now (x's evaluation below is not accounted again)
                 keys = [r.tobytes() for r in X]
-                todo = self._accounted(keys)
-                self._charged.update(keys[i] for i in todo)
+                self._charged.update(keys[i] for i in self._accounted(keys))
                 self._fill(X[:1])
         return self.cache[key]
 
