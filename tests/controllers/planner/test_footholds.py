@@ -166,6 +166,53 @@ def test_ranked_candidates_pick_spaced_footholds_that_keep_a_chain():
     assert abs(cx2[picks2[0]] - warm) < rules.resolution
 
 
+def plain_ranked(tmap, stance, rules, l, spacing, theta, sigma, depth, warm_x, need):  # noqa: E741
+    """The ranking rule of :meth:`FootholdChains.ranked`, written out in Python with the
+    exhaustive chain lengths: every candidate ranked (0: chains continue however far the foot
+    lands off by up to 8 mm, 1: by up to 4 mm, 2: from the foothold only, 3: no chain), the
+    candidate nearest the warm start picked first, then spaced candidates in rank order."""
+    cx, _, _ = candidate_footholds(tmap, stance, rules, l, theta, sigma)
+
+    def rank(x):
+        if brute_reach(tmap, x, depth, rules, l) < depth:
+            return 3
+        for r, s in enumerate((0.008, 0.004)):
+            if min(brute_reach(tmap, x + d, depth, rules, l) for d in (-s, s)) >= depth:
+                return r
+        return 2
+
+    ranks = [rank(float(x)) for x in cx]
+    order = sorted(range(cx.size), key=lambda k: (ranks[k], k))
+    picks = []
+    near = [k for k in range(cx.size) if warm_x is not None and abs(cx[k] - warm_x) < 0.002]
+    for k in [min(near, key=lambda k: (ranks[k], k))] if near else []:
+        picks.append(k)
+    for k in order:
+        if len(picks) < need and all(abs(cx[k] - cx[p]) >= spacing for p in picks):
+            picks.append(k)
+    return cx[[k for k in picks]], [ranks[k] for k in picks]
+
+
+@pytest.mark.parametrize("terrain", ["stairs_up", "stairs_down", "blocks"])
+def test_the_compiled_ranking_picks_what_the_plain_rule_picks(terrain):
+    """The picks of :meth:`FootholdChains.ranked` (lazily ranked, memoised, compiled) are the
+    footholds the plain rule picks, with the same ranks, from stance feet along the course,
+    with and without a warm start."""
+    cfg = PlannerConfig.for_robot("paper")
+    rules, l = cfg.rules(), 0.32  # noqa: E741
+    tmap = TerrainMap(TERRAINS[terrain])
+    chains = FootholdChains(rules, l, cfg.candidate_spacing)
+    for x0 in np.linspace(0.05, 0.65, 7):
+        stance = (float(x0), float(tmap.height(x0)))
+        for warm in (None, float(x0) + 0.3):
+            cx, _, picks, _ = chains.ranked(tmap, stance, 0.2, -0.2, 2, warm, 3)
+            ref_x, ref_ranks = plain_ranked(
+                tmap, stance, rules, l, cfg.candidate_spacing, 0.2, -0.2, 2, warm, 3
+            )
+            np.testing.assert_array_equal(cx[picks], ref_x)
+            assert [chains.landing_rank(tmap, float(x), 2) for x in cx[picks]] == ref_ranks
+
+
 def test_terrain_key_identifies_the_polyline():
     a, b = TerrainMap(TERRAINS["blocks"]), TerrainMap(TERRAINS["blocks"])
     assert a.key == b.key and a.key != TerrainMap(TERRAINS["flat"]).key
