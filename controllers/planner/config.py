@@ -51,6 +51,11 @@ class PlanningError(RuntimeError):
         msg = f"planning failed at step {self.step}: {self.constraint}"
         super().__init__(msg + (f" ({detail})" if detail else ""))
 
+    def __reduce__(self) -> tuple:
+        """Pickle (and copy) with the constructor's arguments and what the search set: a
+        failure crosses process boundaries (vectorised envs, Ray workers) whole."""
+        return type(self), (self.step, self.constraint, self.detail), self.__dict__
+
 
 @dataclass(frozen=True)
 class PlannerConfig:

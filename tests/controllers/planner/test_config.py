@@ -1,8 +1,11 @@
-"""Planner settings: validation and the robot presets."""
+"""Planner settings: validation and the robot presets; the planner's failure."""
+
+import copy
+import pickle
 
 import pytest
 
-from controllers.planner import GaitPlanner, PlannerConfig
+from controllers.planner import GaitPlanner, PlannerConfig, PlanningError
 from envs.physics import RobotParams
 
 
@@ -46,3 +49,16 @@ def test_foot_geometry_settings_moved_to_the_robot(key):
 def test_the_planner_rejects_a_half_leg_retraction():
     with pytest.raises(ValueError, match=r"RobotParams\.retract = 0.5.*\[0, 0.5\)"):
         GaitPlanner(RobotParams.from_preset("paper").replace(retract=0.5))
+
+
+def test_a_planning_failure_pickles_and_copies_whole():
+    """A failure crosses process boundaries (vectorised envs, Ray workers) and deep copies with
+    its message and what the search found."""
+    exc = PlanningError(2, "torque", "foothold x = 0.412 m")
+    exc.partial, exc.evaluations, exc.beam_evaluations = ["step 0", "step 1"], 1234, 567
+    exc.budget_exhausted = True
+    for back in (pickle.loads(pickle.dumps(exc)), copy.deepcopy(exc)):
+        assert type(back) is PlanningError and str(back) == str(exc)
+        assert (back.step, back.constraint, back.detail) == (2, "torque", exc.detail)
+        assert back.partial == exc.partial and back.evaluations == 1234
+        assert back.beam_evaluations == 567 and back.budget_exhausted
