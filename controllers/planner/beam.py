@@ -12,6 +12,9 @@ lead to (the slowest, the fastest and evenly between), so that branches reaching
 slower or faster stay in the search. Of all children of a depth it keeps the ``beam_width``
 cheapest by the cost accumulated over the branch, at most two per foothold. The result is a
 plan of feasible (not optimised) steps over the whole horizon, or the deepest branch found.
+With ``PlannerConfig.beam_coarse`` a coarse pass comes first, with the first few shapes of
+each set: its budget then reaches more branches, and where it spans the horizon the full set
+is not tried.
 
 Nothing here optimises: the steps are the sampled shapes themselves, every constraint of the
 step problem holds on them as for any planned step, and the next footstep's depth-first search
@@ -71,16 +74,40 @@ def beam_steps(
     search: StepSearch, start: tuple[float, float, float, float], stance: tuple[float, float]
 ) -> tuple[list[StepPlan], int, bool]:
     """The beam search from ``start = (theta_plus, a_0, phi'(theta_plus), theta_dot_plus)``
-    [rad, rad, -, rad/s] with the stance foot at ``stance`` [m], over ``search.horizon`` steps.
+    [rad, rad, -, rad/s] with the stance foot at ``stance`` [m], over ``search.horizon`` steps:
+    with ``PlannerConfig.beam_coarse`` > 0, a coarse pass first (that many of each set of
+    shapes), then, where it spans no horizon, the full search with the evaluations left.
 
     Returns ``(steps, evaluations, exhausted)``: the cheapest branch that spans the horizon,
-    else the deepest branch found (possibly empty), as :class:`StepPlan` s; the step evaluations
-    spent (at most ``PlannerConfig.beam_evaluations`` plus one batch; the call's
-    ``time_budget`` bounds it too); and whether the budget cut the search.
+    else the deepest branch found (possibly empty; the full pass's where the two reach as
+    deep), as :class:`StepPlan` s; the step evaluations spent (at most
+    ``PlannerConfig.beam_evaluations`` plus one batch a pass; the call's ``time_budget`` bounds
+    it too); and whether the budget cut the search.
     """
+    cfg = search.config
+    used = 0
+    coarse: list[StepPlan] = []
+    if cfg.beam_coarse > 0:
+        coarse, used, cut = _beam_pass(search, start, stance, cfg.beam_coarse, cfg.beam_evaluations)
+        if len(coarse) == search.horizon or cut:
+            return coarse, used, cut
+    steps, more, cut = _beam_pass(search, start, stance, _NEAR, cfg.beam_evaluations - used)
+    return (steps if len(steps) >= len(coarse) else coarse), used + more, cut
+
+
+def _beam_pass(
+    search: StepSearch,
+    start: tuple[float, float, float, float],
+    stance: tuple[float, float],
+    shapes: int,
+    evaluations: int,
+) -> tuple[list[StepPlan], int, bool]:
+    """One beam search (:func:`beam_steps`) with the first ``shapes`` of each set of
+    :func:`beam_shapes` and a budget of ``evaluations`` step evaluations."""
     cfg, sm, l = search.config, search.model, search.params.l  # noqa: E741
-    budget = search.evaluations.another(cfg.beam_evaluations)  # (and the call's time bound)
+    budget = search.evaluations.another(evaluations)  # (and the call's time bound)
     near, far = beam_shapes(cfg.order)
+    near, far = near[:shapes], far[:shapes]
     rel = sm.ref.shape
     sm.wscale = 1.0
     beam = [_Branch(0.0, [], start, stance)]

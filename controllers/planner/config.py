@@ -159,6 +159,10 @@ class PlannerConfig:
             the post-impact speeds they lead to (slowest to fastest).
         beam_evaluations: step evaluations one beam search may spend (besides the
             depth-first search's ``max_evaluations``; a deterministic bound).
+        beam_coarse: where > 0, the beam search first runs with this many of each of its two
+            sets of 32 quasi-random shapes per foothold (the first points of each Sobol set)
+            and runs with all of them only where that spans no horizon, with the evaluations
+            left; 0: all of them at once. An integer in [0, 32].
         gauss_newton_scaling: 1: each SLSQP solve of a step (or a pair) runs in coordinates
             in which the Gauss-Newton model of its cost (a sum of squares) at the start point
             is the identity, SLSQP's first Hessian model, up to a floor on its flattest
@@ -228,6 +232,7 @@ class PlannerConfig:
     beam_footholds: int = 8
     beam_speeds: int = 5
     beam_evaluations: int = 40000
+    beam_coarse: int = 0
     gauss_newton_scaling: int = 0
 
     def __new__(cls, *args: Any, **kwargs: Any) -> PlannerConfig:
@@ -258,6 +263,7 @@ class PlannerConfig:
             "beam_footholds": 1,
             "beam_speeds": 0,
             "beam_evaluations": 1,
+            "beam_coarse": 0,
             "gauss_newton_scaling": 0,
         }
         for name, lo in ints.items():
@@ -300,6 +306,8 @@ class PlannerConfig:
         for name in ("pairs_first", "gauss_newton_scaling"):
             if getattr(self, name) > 1:
                 raise ValueError(f"PlannerConfig.{name} = {getattr(self, name)}; allowed: 0 or 1")
+        if self.beam_coarse > 32:
+            raise ValueError(f"PlannerConfig.beam_coarse = {self.beam_coarse}; allowed: [0, 32]")
         if self.lookahead > 2:
             raise ValueError(f"PlannerConfig.lookahead = {self.lookahead}; allowed: 0, 1 or 2")
         self.rules()  # validates the foothold fields
