@@ -473,6 +473,16 @@ def _check_run_dir_writable(run_dir: Path) -> None:
             check_writable(folder, "run folder")
 
 
+def _last_update(cfg: AgentConfig, num_timesteps: int) -> int:
+    """The env steps of the last update at or before ``num_timesteps`` (PPO and A2C, whose
+    checkpoints may fall inside a rollout: its steps are not in the model, and a run resumed
+    there collects the rollout again, ending with as many updates as an uninterrupted run);
+    ``num_timesteps`` itself for SAC and TD3."""
+    if cfg.algo not in ("ppo", "a2c"):
+        return num_timesteps
+    return num_timesteps - num_timesteps % cfg.rollout_steps
+
+
 def _notes(cfg: AgentConfig, start: int) -> list[str]:
     """What the run will do that the config does not say: rounding of the budget, periodic
     evaluations or checkpoints beyond its end."""
@@ -530,7 +540,7 @@ def train(
         log_dir = "runs"
     check_env(cfg)
     point = read_checkpoint(cfg, resume) if resume is not None else None
-    start = point.num_timesteps if point else 0
+    start = _last_update(cfg, point.num_timesteps) if point else 0
     if point is not None and start >= cfg.n_timesteps:
         raise ValueError(
             f"--resume {point.path}: already trained {start:,} env steps, the budget "
@@ -542,6 +552,13 @@ def train(
     else:
         check_writable(parent, "--log-dir")
     notes = _notes(cfg, start)
+    if point is not None and start != point.num_timesteps:
+        notes.insert(
+            0,
+            f"the checkpoint was saved {point.num_timesteps - start:,} env steps into a rollout "
+            f"of {cfg.rollout_steps:,}: training goes on from the update before it, at "
+            f"{start:,} env steps, as the run would have",
+        )
 
     # everything is checked: from here on, files are written
     run_dir = in_place or create_run_dir(parent, run_dir_for(cfg, parent).name)
@@ -553,6 +570,8 @@ def train(
         if in_place is None:
             shutil.rmtree(run_dir, ignore_errors=True)
         raise
+    if point is not None:
+        model.num_timesteps = start
     for note in notes:
         print(f"note: {note}")
     manifest = _start_manifest(cfg, run_dir, point, in_place is not None)

@@ -120,6 +120,25 @@ def test_resuming_a_finished_run_continues_into_a_new_run_folder(smoke, tmp_path
     assert any((resumed / "monitor").glob("*.monitor.csv"))
 
 
+def test_resuming_within_a_rollout_ends_as_the_uninterrupted_run(
+    smoke, tmp_path: Path, capsys: pytest.CaptureFixture
+):
+    """A PPO checkpoint saved inside a rollout holds the model of the update before it: the
+    resumed run collects that rollout again from there and ends, as the uninterrupted run, at
+    the budget rounded up to whole rollouts, after as many updates."""
+    cfg = smoke(CONFIG_DIR / "ppo_stairs.yaml", timesteps=2048)
+    cfg.checkpoint_freq = 768  # rollouts of 1,024 env steps: checkpoints at 768 and 1,536
+    run = train(cfg, log_dir=tmp_path, progress_bar=False, tensorboard=False)
+    ckpt = run / "checkpoints" / "rl_model_1536_steps.zip"
+    capsys.readouterr()
+    resumed = train(cfg, log_dir=None, resume=ckpt, progress_bar=False, tensorboard=False)
+    assert "512 env steps into a rollout of 1,024" in capsys.readouterr().out
+    for folder in (run, resumed):
+        assert json.loads((folder / "manifest.json").read_text())["num_timesteps"] == 2048
+    updates = [TrainedPolicy(r / "model.zip").model._n_updates for r in (run, resumed)]
+    assert updates[0] == updates[1] == 2 * cfg.hyperparams["n_epochs"]
+
+
 def test_periodic_evaluation_uses_the_same_held_out_courses(smoke, tmp_path: Path):
     # a frozen agent (no learning, no normalisation updates) must score identically each time
     cfg = smoke(CONFIG_DIR / "ppo_rough.yaml", timesteps=1536)
