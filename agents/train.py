@@ -574,7 +574,7 @@ def train(
         model.num_timesteps = start
     for note in notes:
         print(f"note: {note}")
-    manifest = _start_manifest(cfg, run_dir, point, in_place is not None)
+    manifest = _start_manifest(cfg, run_dir, point, in_place is not None, start)
     atomic_write_text(run_dir / "config.yaml", yaml.safe_dump(cfg.to_dict(), sort_keys=False))
 
     from agents.callbacks import ProgressBar
@@ -618,9 +618,10 @@ def _add_time(manifest: dict[str, Any], seconds: float) -> None:
 
 
 def _start_manifest(
-    cfg: AgentConfig, run_dir: Path, point: ResumePoint | None, in_place: bool
+    cfg: AgentConfig, run_dir: Path, point: ResumePoint | None, in_place: bool, start: int = 0
 ) -> dict[str, Any]:
-    """Write the manifest of a run that starts (or resumes) training, and return it."""
+    """Write the manifest of a run that starts (or resumes, from ``start`` env steps) training,
+    and return it."""
     manifest = read_manifest(run_dir) if in_place else {}
     n_envs = cfg.n_envs
     manifest.update(
@@ -633,8 +634,8 @@ def _start_manifest(
             "env_kwargs": cfg.env_kwargs,
             "residual": cfg.is_residual,
             "n_timesteps": cfg.n_timesteps,
-            "planned_timesteps": cfg.planned_timesteps(point.num_timesteps if point else 0),
-            "num_timesteps": point.num_timesteps if point else 0,
+            "planned_timesteps": cfg.planned_timesteps(start),
+            "num_timesteps": start,
             "seeds": {
                 "training": cfg.seed,
                 "training_envs": [cfg.seed + i for i in range(n_envs)],

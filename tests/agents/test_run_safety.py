@@ -128,12 +128,13 @@ def test_an_interrupted_training_is_saved_and_resumes_to_the_budget(
     resumed = train(cfg, log_dir=None, resume=ckpt, progress_bar=False, tensorboard=False)
     assert resumed == run  # an interrupted run continues in its own folder
     manifest = json.loads((run / "manifest.json").read_text())
-    # whole rollouts from 512: the budget is reached at 2,560 steps, and reported so
+    # the checkpoint holds the model before the first update: the first rollout is collected
+    # again, and the run ends at the budget in whole rollouts, as the uninterrupted run
     assert manifest["status"] == "finished" and manifest["n_timesteps"] == 2048
-    assert manifest["num_timesteps"] == manifest["planned_timesteps"] == 2560
+    assert manifest["num_timesteps"] == manifest["planned_timesteps"] == 2048
     assert manifest["resumed_from"] == [str(ckpt)]
     assert (run / "model.zip").is_file()
-    assert list(np.load(run / "eval" / "evaluations.npz")["timesteps"]) == [1536, 2560]
+    assert list(np.load(run / "eval" / "evaluations.npz")["timesteps"]) == [1024, 2048]
     assert any((run / "monitor" / "resume1").glob("*.monitor.csv"))
 
 
