@@ -53,7 +53,13 @@ import yaml
 
 import envs  # noqa: F401  (registers the roughwalk ids)
 from agents.footstep import FootstepWrapper
-from agents.hyperparams import OFF_POLICY, RUN_OPTION_DEFAULTS, RUN_OPTIONS, check_hyperparams
+from agents.hyperparams import (
+    OFF_POLICY,
+    ON_POLICY,
+    RUN_OPTION_DEFAULTS,
+    RUN_OPTIONS,
+    check_hyperparams,
+)
 from agents.residual import ResidualWrapper
 from envs.config_util import read_yaml_mapping
 
@@ -237,7 +243,7 @@ class AgentConfig:
         ``n_steps * n_envs``; SAC and TD3: ``train_freq * n_envs`` when ``train_freq`` counts
         steps, else ``n_envs``)."""
         defaults = inspect.signature(self.algo_class.__init__).parameters
-        if self.algo in ("ppo", "a2c"):
+        if self.algo in ON_POLICY:
             return int(self.hyperparams.get("n_steps", defaults["n_steps"].default)) * self.n_envs
         freq = self.hyperparams.get("train_freq", defaults["train_freq"].default)
         if isinstance(freq, list | tuple):

@@ -49,6 +49,7 @@ import yaml
 
 import envs  # noqa: F401  (registers the roughwalk ids, also in subprocesses)
 from agents.config import EVAL_SEED_OFFSET, AgentConfig, ConfigError
+from agents.hyperparams import ON_POLICY
 from agents.policies import base_settings
 from agents.runs import (
     FINISHED,
@@ -478,7 +479,7 @@ def _last_update(cfg: AgentConfig, num_timesteps: int) -> int:
     checkpoints may fall inside a rollout: its steps are not in the model, and a run resumed
     there collects the rollout again, ending with as many updates as an uninterrupted run);
     ``num_timesteps`` itself for SAC and TD3."""
-    if cfg.algo not in ("ppo", "a2c"):
+    if cfg.algo not in ON_POLICY:
         return num_timesteps
     return num_timesteps - num_timesteps % cfg.rollout_steps
 

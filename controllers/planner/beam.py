@@ -30,6 +30,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from ..bezier import BezierConstraint, chord_coefficients
+from .config import BEAM_SHAPES
 from .footholds import touchdown_configuration
 from .plan import StepPlan
 from .problem import MIN_PHASE_SPAN, BudgetExhausted, SearchBudget, shape_guess
@@ -41,7 +42,6 @@ __all__ = ["beam_steps", "beam_shapes"]
 
 _FEASIBLE = -1e-7  # least constraint value of a feasible step (as in the search)
 _PER_FOOTHOLD = 2  # branches kept per foothold at each depth (diversity)
-_NEAR, _FAR = 32, 32  # shapes near the gait's and over the global-search range
 _NEAR_SPAN = 0.4  # half-width of the box around the gait's shape (fractions of the chord)
 
 
@@ -54,8 +54,8 @@ def beam_shapes(order: int) -> tuple[np.ndarray, np.ndarray]:
     from scipy.stats import qmc  # deferred: scipy.stats is slow to import
 
     k = order - 2
-    near = _NEAR_SPAN * (2.0 * qmc.Sobol(k, seed=1).random(_NEAR) - 1.0)
-    far = -1.0 + 3.5 * qmc.Sobol(k, seed=0).random(_FAR)
+    near = _NEAR_SPAN * (2.0 * qmc.Sobol(k, seed=1).random(BEAM_SHAPES) - 1.0)
+    far = -1.0 + 3.5 * qmc.Sobol(k, seed=0).random(BEAM_SHAPES)
     near.setflags(write=False)
     far.setflags(write=False)
     return near, far
@@ -91,7 +91,7 @@ def beam_steps(
         coarse, used, cut = _beam_pass(search, start, stance, cfg.beam_coarse, cfg.beam_evaluations)
         if len(coarse) == search.horizon or cut:
             return coarse, used, cut
-    steps, more, cut = _beam_pass(search, start, stance, _NEAR, cfg.beam_evaluations - used)
+    steps, more, cut = _beam_pass(search, start, stance, BEAM_SHAPES, cfg.beam_evaluations - used)
     return (steps if len(steps) >= len(coarse) else coarse), used + more, cut
 
 

@@ -28,6 +28,11 @@ from .footholds import FootholdRules
 __all__ = ["PlannerConfig", "PlanningError"]
 
 
+#: quasi-random shapes in each of the beam search's two sets per foothold (near the gait's
+#: shape and over the global search's range; :func:`controllers.planner.beam.beam_shapes`)
+BEAM_SHAPES = 32
+
+
 class PlanningError(RuntimeError):
     """No feasible plan: ``step`` (index within the horizon), the violated ``constraint`` and
     an optional ``detail`` (free text added to the message).
@@ -160,9 +165,9 @@ class PlannerConfig:
         beam_evaluations: step evaluations one beam search may spend (besides the
             depth-first search's ``max_evaluations``; a deterministic bound).
         beam_coarse: where > 0, the beam search first runs with this many of each of its two
-            sets of 32 quasi-random shapes per foothold (the first points of each Sobol set)
-            and runs with all of them only where that spans no horizon, with the evaluations
-            left; 0: all of them at once. An integer in [0, 32].
+            sets of :data:`BEAM_SHAPES` quasi-random shapes per foothold (the first points of
+            each Sobol set) and runs with all of them only where that spans no horizon, with
+            the evaluations left; 0: all of them at once. An integer in [0, BEAM_SHAPES].
         gauss_newton_scaling: 1: each SLSQP solve of a step (or a pair) runs in coordinates
             in which the Gauss-Newton model of its cost (a sum of squares) at the start point
             is the identity, SLSQP's first Hessian model, up to a floor on its flattest
@@ -306,8 +311,10 @@ class PlannerConfig:
         for name in ("pairs_first", "gauss_newton_scaling"):
             if getattr(self, name) > 1:
                 raise ValueError(f"PlannerConfig.{name} = {getattr(self, name)}; allowed: 0 or 1")
-        if self.beam_coarse > 32:
-            raise ValueError(f"PlannerConfig.beam_coarse = {self.beam_coarse}; allowed: [0, 32]")
+        if self.beam_coarse > BEAM_SHAPES:
+            raise ValueError(
+                f"PlannerConfig.beam_coarse = {self.beam_coarse}; allowed: [0, {BEAM_SHAPES}]"
+            )
         if self.lookahead > 2:
             raise ValueError(f"PlannerConfig.lookahead = {self.lookahead}; allowed: 0, 1 or 2")
         self.rules()  # validates the foothold fields
