@@ -167,7 +167,8 @@ class PlannerConfig:
         beam_coarse: where > 0, the beam search first runs with this many of each of its two
             sets of :data:`BEAM_SHAPES` quasi-random shapes per foothold (the first points of
             each Sobol set) and runs with all of them only where that spans no horizon, with
-            the evaluations left; 0: all of them at once. An integer in [0, BEAM_SHAPES].
+            the evaluations left; 0: all of them at once. The paper robot's preset has 8 (held
+            out; before, 0). An integer in [0, BEAM_SHAPES].
         gauss_newton_scaling: 1: each SLSQP solve of a step (or a pair) runs in coordinates
             in which the Gauss-Newton model of its cost (a sum of squares) at the start point
             is the identity, SLSQP's first Hessian model, up to a floor on its flattest

@@ -12,6 +12,7 @@ from .test_budget import WALL
 from .test_plan import rollout
 
 HORIZON, BUDGET = 4, 2000  # the reference controller's look-ahead and replanning budget
+FULL = {"beam_width": 32, "beam_coarse": 0}  # the full beam alone (no coarse pass first)
 
 
 def plan_blocks(course, **settings):
@@ -77,14 +78,14 @@ def test_the_beam_plans_the_horizon_where_the_depth_first_search_stops_short(ris
         plan_blocks(course, beam_width=0)
     partial = info.value.partial
     assert info.value.step == HORIZON - 1 and len(partial) == HORIZON - 1
-    plan = plan_blocks(course, beam_width=32)
+    plan = plan_blocks(course, **FULL)
     assert plan.beam and len(plan) == HORIZON
     assert BUDGET < plan.evaluations <= BUDGET + PlannerConfig().beam_evaluations + 100
     # the beam's evaluations are counted apart (its own budget): the rest is the depth-first
     # search's, within the call's budget
     assert 0 < plan.beam_evaluations <= PlannerConfig().beam_evaluations + 65
     assert plan.evaluations - plan.beam_evaluations <= BUDGET + 100
-    pl = GaitPlanner("paper", {"beam_width": 32})
+    pl = GaitPlanner("paper", FULL)
     assert_feasible_chain(pl, plan, course)
     # the steps shed the speed gained down the drops: the last block before the rise is
     # reached slower than by the depth-first search's steps, whose next step found no shape
@@ -99,12 +100,12 @@ def test_the_beam_plans_the_horizon_where_the_depth_first_search_stops_short(ris
 
 def test_the_beam_is_deterministic_and_bounded_by_its_budget(rise_after_drops):
     course = rise_after_drops
-    a, b = plan_blocks(course, beam_width=32), plan_blocks(course, beam_width=32)
+    a, b = plan_blocks(course, **FULL), plan_blocks(course, **FULL)
     for s, t in zip(a, b):
         assert np.array_equal(s.coeffs, t.coeffs) and s.foothold == t.foothold
     # a budget too small to reach the horizon: the search fails, keeping its deepest steps
     with pytest.raises(PlanningError) as info:
-        plan_blocks(course, beam_width=32, beam_evaluations=300)
+        plan_blocks(course, **FULL, beam_evaluations=300)
     exc = info.value
     assert not exc.partial or len(exc.partial) < HORIZON
     assert exc.evaluations <= BUDGET + 100 + 300 + 100
@@ -113,12 +114,13 @@ def test_the_beam_is_deterministic_and_bounded_by_its_budget(rise_after_drops):
 
 
 def test_a_coarse_beam_pass_plans_the_horizon_for_a_fraction_of_the_evaluations():
-    """With ``beam_coarse`` the beam first tries 8 of each set of shapes: where that spans the
-    horizon it is the plan (feasible, followed under PFL), on the same footholds as the full
-    beam's here, for under a quarter of its evaluations."""
+    """With ``beam_coarse`` (the paper robot's default: 8) the beam first tries 8 of each set of
+    shapes: where that spans the horizon it is the plan (feasible, followed under PFL), on the
+    same footholds as the full beam's here, for under a quarter of its evaluations."""
     course = BlocksBeforeARise()
-    full = plan_blocks(course, beam_width=32)
-    coarse = plan_blocks(course, beam_width=32, beam_coarse=8)
+    full = plan_blocks(course, **FULL)
+    coarse = plan_blocks(course)
+    assert GaitPlanner("paper").config.beam_coarse == 8
     assert full.beam and coarse.beam and len(full) == len(coarse) == HORIZON
     assert [s.foothold for s in coarse] == [s.foothold for s in full]
     assert 0 < 4 * coarse.beam_evaluations < full.beam_evaluations
@@ -131,7 +133,7 @@ def test_where_the_coarse_pass_spans_no_horizon_the_full_beam_plans(rise_after_d
     """No coarse pass spans the horizon before the 13 mm rise: the full beam then runs with the
     evaluations left and plans what the full beam alone plans; the call spends both passes'
     evaluations, within the beam's budget."""
-    full = plan_blocks(rise_after_drops, beam_width=32)
+    full = plan_blocks(rise_after_drops, **FULL)
     budget = PlannerConfig().beam_evaluations
     for shapes in (1, 8):
         plan = plan_blocks(rise_after_drops, beam_width=32, beam_coarse=shapes)
