@@ -369,101 +369,104 @@ def planner_section(args: argparse.Namespace) -> list[Row]:
             value = f"{np.median(times) * 1e3:.1f}" if times else "-"
             rows.append((label, value, "ms"))
     episodes = args.episodes or (2 if args.quick else 6)
+    # the defaults, and the previous defaults (the full beam search alone, no coarse pass
+    # first) on the same courses, course by course in turn
     for difficulty in (1.0, 2.0):
-        rows += _closed_loop_replanning(episodes, difficulty, base=changes)
-    # the previous defaults (the full beam search alone, no coarse pass first), against the
-    # defaults above on the same courses
-    for difficulty in (1.0, 2.0):
-        rows += _closed_loop_replanning(episodes, difficulty, {"beam_coarse": 0}, base=changes)
+        rows += _closed_loop_replanning(episodes, difficulty, [{}, {"beam_coarse": 0}], changes)
     return rows
 
 
 def _closed_loop_replanning(
     episodes: int,
     difficulty: float,
-    planner: dict | None = None,
-    controller: dict | None = None,
+    planners: list[dict],
     base: dict | None = None,
 ) -> list[Row]:
     """Replanning per footstep of the reference policy (sensors, observer, replanning at every
-    touchdown) on ``CompassGaitRough-v0`` at ``difficulty``, evaluation seeds 1,001,000 on:
-    median, 95th and 99th percentile over the footsteps of ``episodes`` episodes (the planner
-    call, degradations included), and the step evaluations it spends (the same on any
-    machine); the env steps per second of the whole loop (policy and env)
-    against the bare env on the same courses under zero input, in the same run; and the time
-    of its online identification per fit (median, 95th percentile, largest). ``planner``,
-    ``controller``: changes to the robot's planner and controller defaults (named in the
-    rows); ``base``: planner changes of the whole run (``--planner``, named in the title)."""
+    touchdown) on ``CompassGaitRough-v0`` at ``difficulty``, evaluation seeds 1,001,000 on,
+    with each of ``planners`` (changes to the robot's planner defaults, named in the rows; {}:
+    the defaults): median, 95th and 99th percentile over the footsteps of ``episodes`` episodes
+    (the planner call, degradations included), and the step evaluations it spends (the same on
+    any machine); the env steps per second of the whole loop (policy and env) against the bare
+    env on the same courses under zero input; and the time of its online identification per
+    fit (median, 95th percentile, largest). Each course is walked with every setting and then
+    by the bare env (as many steps as the first setting's walk) before the next course, so
+    that a machine whose speed drifts during the run slows them alike. ``base``: planner
+    changes of the whole run (``--planner``, named in the title)."""
     env = gym.make("roughwalk/CompassGaitRough-v0", difficulty=difficulty)
-    policy = ReferencePolicy(env, config=controller, planner={**(base or {}), **(planner or {})})
-    times: list[float] = []
-    work: list[int] = []  # step evaluations per footstep: the machine's speed aside
-    fits: list[float] = []
-    steps, t0 = 0, time.perf_counter()
-    for k in range(episodes):
-        obs, _ = env.reset(seed=1_001_000 + k)
-        policy.reset()
-        done = False
-        while not done:
-            obs, _, terminated, truncated, _ = env.step(policy(obs))
-            done = terminated or truncated
-            steps += 1
-        times += [r.plan_time for r in policy.records[1:] if r.plan_time > 0]
-        work += [r.plan_evaluations for r in policy.records[1:] if r.plan_time > 0]
-        fits += [r.seconds for r in policy.diagnostics["identified"]]
-    loop = steps / (time.perf_counter() - t0)
-    # the bare env in the same run: the same courses under zero input, as many steps
+    policies = [ReferencePolicy(env, planner={**(base or {}), **p}) for p in planners]
+    times: list[list[float]] = [[] for _ in planners]
+    work: list[list[int]] = [[] for _ in planners]  # step evaluations: the machine aside
+    fits: list[list[float]] = [[] for _ in planners]
+    steps, seconds = [0] * len(planners), [0.0] * len(planners)
+    bare_steps, bare_seconds = 0, 0.0
     zero = np.zeros(1, dtype=np.float32)
-    bare_steps, k, t0 = 0, 0, time.perf_counter()
-    while bare_steps < steps:
-        env.reset(seed=1_001_000 + k % episodes)
-        k += 1
-        done = False
-        while not done and bare_steps < steps:
-            _, _, terminated, truncated, _ = env.step(zero)
-            done = terminated or truncated
-            bare_steps += 1
-    bare = bare_steps / (time.perf_counter() - t0)
+    for k in range(episodes):
+        order = range(len(policies)) if k % 2 == 0 else range(len(policies) - 1, -1, -1)
+        for i in order:  # every other course in the reverse order: neither always walks first
+            policy = policies[i]
+            t0 = time.perf_counter()
+            obs, _ = env.reset(seed=1_001_000 + k)
+            policy.reset()
+            done, n = False, 0
+            while not done:
+                obs, _, terminated, truncated, _ = env.step(policy(obs))
+                done = terminated or truncated
+                n += 1
+            seconds[i] += time.perf_counter() - t0
+            steps[i] += n
+            times[i] += [r.plan_time for r in policy.records[1:] if r.plan_time > 0]
+            work[i] += [r.plan_evaluations for r in policy.records[1:] if r.plan_time > 0]
+            fits[i] += [r.seconds for r in policy.diagnostics["identified"]]
+            if i == 0:
+                walked = n
+        # the bare env on the same course under zero input, as many steps
+        t0, n = time.perf_counter(), 0
+        while n < walked:
+            env.reset(seed=1_001_000 + k)
+            done = False
+            while not done and n < walked:
+                _, _, terminated, truncated, _ = env.step(zero)
+                done = terminated or truncated
+                n += 1
+        bare_seconds += time.perf_counter() - t0
+        bare_steps += n
     env.close()
-    median, p95, p99 = np.percentile(times, [50, 95, 99]) * 1e3 if times else (np.nan,) * 3
-    f50, f95, fmax = (*np.percentile(fits, [50, 95]), max(fits)) if fits else (np.nan,) * 3
-    where = f"reference policy, CompassGaitRough-v0 difficulty {difficulty:g} ({episodes} episodes)"
-    if planner:
-        where += ", planner " + ", ".join(f"{k}={v}" for k, v in planner.items())
-    if controller:
-        where += ", controller " + ", ".join(f"{k}={_setting(v)}" for k, v in controller.items())
-    return [
-        (
-            f"replanning per footstep in closed loop (median / p95 / p99): {where}",
-            f"{median:.1f} / {p95:.1f} / {p99:.1f}",
-            "ms",
-        ),
-        (
-            f"step evaluations per footstep in closed loop (median / mean / p99): {where}",
-            f"{np.median(work):.0f} / {np.mean(work):.0f} / {np.percentile(work, 99):.0f}"
-            if work
-            else "-",
-            "",
-        ),
-        (
-            f"reference policy in the loop, env steps/s (its own planning, identification and "
-            f"sensors included) / the bare env in the same run: {where}",
-            f"{loop:,.0f} / {bare:,.0f} (x{bare / loop:.0f})",
-            "steps/s",
-        ),
-        (
-            f"online identification per fit, first 6 footsteps (median / p95 / max): {where}",
-            f"{f50 * 1e3:.0f} / {f95 * 1e3:.0f} / {fmax * 1e3:.0f}",
-            "ms",
-        ),
-    ]
-
-
-def _setting(value: object) -> str:
-    """A setting as a row names it: a mapping as ``{field: value, ...}``."""
-    if isinstance(value, dict):
-        return "{" + ", ".join(f"{k}: {v:g}" for k, v in value.items()) + "}"
-    return str(value)
+    bare = bare_steps / bare_seconds
+    rows: list[Row] = []
+    for planner, t, w, f, n, sec in zip(planners, times, work, fits, steps, seconds):
+        loop = n / sec
+        median, p95, p99 = np.percentile(t, [50, 95, 99]) * 1e3 if t else (np.nan,) * 3
+        f50, f95, fmax = (*np.percentile(f, [50, 95]), max(f)) if f else (np.nan,) * 3
+        where = (
+            f"reference policy, CompassGaitRough-v0 difficulty {difficulty:g} ({episodes} episodes)"
+        )
+        if planner:
+            where += ", planner " + ", ".join(f"{k}={v}" for k, v in planner.items())
+        rows += [
+            (
+                f"replanning per footstep in closed loop (median / p95 / p99): {where}",
+                f"{median:.1f} / {p95:.1f} / {p99:.1f}",
+                "ms",
+            ),
+            (
+                f"step evaluations per footstep in closed loop (median / mean / p99): {where}",
+                f"{np.median(w):.0f} / {np.mean(w):.0f} / {np.percentile(w, 99):.0f}" if w else "-",
+                "",
+            ),
+            (
+                f"reference policy in the loop, env steps/s (its own planning, identification "
+                f"and sensors included) / the bare env, course by course in the same run: {where}",
+                f"{loop:,.0f} / {bare:,.0f} (x{bare / loop:.0f})",
+                "steps/s",
+            ),
+            (
+                f"online identification per fit, first 6 footsteps (median / p95 / max): {where}",
+                f"{f50 * 1e3:.0f} / {f95 * 1e3:.0f} / {fmax * 1e3:.0f}",
+                "ms",
+            ),
+        ]
+    return rows
 
 
 #: benchmark sections, run in order: (title, function)

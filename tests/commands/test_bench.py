@@ -17,6 +17,9 @@ def test_bench_planner_section_takes_episodes_and_planner_settings(capsys, monke
     assert main([*argv, "--planner", "clearance=0.003"]) == 0
     out = " ".join(capsys.readouterr().out.split())
     assert "planner clearance=0.003" in out and "difficulty 1 (1 episodes)" in out
+    # the previous defaults walk the same courses in the same run, course by course
+    assert "difficulty 2 (1 episodes), planner beam_coarse=0" in out
+    assert "the bare env, course by course in the same run" in out
     assert main([*argv, "--planner", "clearance=-1"]) == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert err == ["roughwalk bench: error: --planner: PlannerConfig.clearance = -1; allowed: >= 0"]
