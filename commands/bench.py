@@ -376,6 +376,11 @@ def planner_section(args: argparse.Namespace) -> list[Row]:
     return rows
 
 
+#: env steps each setting of the closed-loop rows walks untimed first (10 ms each: the first
+#: footsteps, with their replans and identification fits)
+_WARM_UP_STEPS = 300
+
+
 def _closed_loop_replanning(
     episodes: int,
     difficulty: float,
@@ -389,10 +394,11 @@ def _closed_loop_replanning(
     (the planner call, degradations included), and the step evaluations it spends (the same on
     any machine); the env steps per second of the whole loop (policy and env) against the bare
     env on the same courses under zero input; and the time of its online identification per
-    fit (median, 95th percentile, largest). Each course is walked with every setting and then
-    by the bare env (as many steps as the first setting's walk) before the next course, so
-    that a machine whose speed drifts during the run slows them alike. ``base``: planner
-    changes of the whole run (``--planner``, named in the title)."""
+    fit (median, 95th percentile, largest). Each setting first walks the first
+    :data:`_WARM_UP_STEPS` steps of the first course, untimed. Then each course is walked with
+    every setting and then by the bare env (as many steps as the first setting's walk) before
+    the next course, so that a machine whose speed drifts during the run slows them alike.
+    ``base``: planner changes of the whole run (``--planner``, named in the title)."""
     env = gym.make("roughwalk/CompassGaitRough-v0", difficulty=difficulty)
     policies = [ReferencePolicy(env, planner={**(base or {}), **p}) for p in planners]
     times: list[list[float]] = [[] for _ in planners]
@@ -401,6 +407,13 @@ def _closed_loop_replanning(
     steps, seconds = [0] * len(planners), [0.0] * len(planners)
     bare_steps, bare_seconds = 0, 0.0
     zero = np.zeros(1, dtype=np.float32)
+    for policy in policies:  # warm-up, untimed: the first footsteps' planning and fits
+        obs, _ = env.reset(seed=1_001_000)
+        policy.reset()
+        for _ in range(_WARM_UP_STEPS):
+            obs, _, terminated, truncated, _ = env.step(policy(obs))
+            if terminated or truncated:
+                break
     for k in range(episodes):
         order = range(len(policies)) if k % 2 == 0 else range(len(policies) - 1, -1, -1)
         for i in order:  # every other course in the reverse order: neither always walks first
