@@ -376,6 +376,27 @@ def planner_section(args: argparse.Namespace) -> list[Row]:
     return rows
 
 
+def _walk(
+    env: gym.Env,
+    act: Callable[[np.ndarray], np.ndarray],
+    seed: int,
+    reset: Callable[[], None] | None = None,
+    limit: int | None = None,
+) -> int:
+    """Walk one episode of ``env`` from ``reset(seed=seed)`` with the actions ``act(obs)``
+    (``reset``: called after the env's, e.g. the policy's), until it ends or for ``limit``
+    steps; the steps walked."""
+    obs, _ = env.reset(seed=seed)
+    if reset is not None:
+        reset()
+    n, done = 0, False
+    while not done and (limit is None or n < limit):
+        obs, _, terminated, truncated, _ = env.step(act(obs))
+        done = terminated or truncated
+        n += 1
+    return n
+
+
 #: env steps each setting of the closed-loop rows walks untimed first (10 ms each: the first
 #: footsteps, with their replans and identification fits)
 _WARM_UP_STEPS = 300
@@ -408,24 +429,13 @@ def _closed_loop_replanning(
     bare_steps, bare_seconds = 0, 0.0
     zero = np.zeros(1, dtype=np.float32)
     for policy in policies:  # warm-up, untimed: the first footsteps' planning and fits
-        obs, _ = env.reset(seed=1_001_000)
-        policy.reset()
-        for _ in range(_WARM_UP_STEPS):
-            obs, _, terminated, truncated, _ = env.step(policy(obs))
-            if terminated or truncated:
-                break
+        _walk(env, policy, 1_001_000, policy.reset, _WARM_UP_STEPS)
     for k in range(episodes):
         order = range(len(policies)) if k % 2 == 0 else range(len(policies) - 1, -1, -1)
         for i in order:  # every other course in the reverse order: neither always walks first
             policy = policies[i]
             t0 = time.perf_counter()
-            obs, _ = env.reset(seed=1_001_000 + k)
-            policy.reset()
-            done, n = False, 0
-            while not done:
-                obs, _, terminated, truncated, _ = env.step(policy(obs))
-                done = terminated or truncated
-                n += 1
+            n = _walk(env, policy, 1_001_000 + k, policy.reset)
             seconds[i] += time.perf_counter() - t0
             steps[i] += n
             times[i] += [r.plan_time for r in policy.records[1:] if r.plan_time > 0]
@@ -436,12 +446,7 @@ def _closed_loop_replanning(
         # the bare env on the same course under zero input, as many steps
         t0, n = time.perf_counter(), 0
         while n < walked:
-            env.reset(seed=1_001_000 + k)
-            done = False
-            while not done and n < walked:
-                _, _, terminated, truncated, _ = env.step(zero)
-                done = terminated or truncated
-                n += 1
+            n += _walk(env, lambda _: zero, 1_001_000 + k, limit=walked - n)
         bare_seconds += time.perf_counter() - t0
         bare_steps += n
     env.close()
