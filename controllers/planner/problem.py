@@ -30,6 +30,7 @@ from dataclasses import dataclass
 from typing import Any, NamedTuple
 
 import numpy as np
+from numba import njit
 
 from envs.physics import model
 from envs.physics.params import RobotParams
@@ -372,6 +373,27 @@ class StepEvaluator:
             self.P, self._free(free, 2), self.cfg.order - 2, self._common(shape_ref), first, second
         )
 
+    def solve_functions(
+        self, fx: FixedStep, fx2: FixedStep | None = None
+    ) -> tuple[Callable[[np.ndarray], tuple], Callable[[np.ndarray], tuple]]:
+        """:meth:`step_values` and :meth:`step_residuals` of the step ``fx`` (with ``fx2``:
+        :meth:`pair_values` and :meth:`pair_residuals` of the pair), as :class:`BatchProblem`
+        takes them, with the problem's kernel data looked up once: for the points of one
+        solve, which changes neither the weights nor the reference. The same numbers; the
+        points must be ``(B, k)`` float64 rows of the right width (a solve's are)."""
+        _, shape_ref, first = self._problem_data(fx, False)
+        P, common = self.P, self._common(shape_ref)
+        if fx2 is None:
+            return (
+                lambda X: kernel.step_values(P, X, common, first),
+                lambda X: kernel.step_residuals(P, X, common, first),
+            )
+        second, n = self._problem_data(fx2, False)[2], self.cfg.order - 2
+        return (
+            lambda X: kernel.pair_values(P, X, n, common, first, second),
+            lambda X: kernel.pair_residuals(P, X, n, common, first, second),
+        )
+
     def _common(self, shape_ref: np.ndarray) -> tuple:
         """What :func:`kernel.evaluate_shapes` takes that every step problem shares."""
         return (self.ref is not None, shape_ref, self.settings, self.grids, _PACK_BLOCK)
@@ -650,11 +672,15 @@ class BatchProblem:
         """The positions of the points ``keys`` not evaluated yet, accounted in the budget
         (which raises :class:`BudgetExhausted` once spent) before they are evaluated, but for
         those accounted already (forward differences put off)."""
-        todo = [i for i, k in enumerate(keys) if k not in self.cache]
-        due = sum(keys[i] not in self._charged for i in todo)
+        cache, charged = self.cache, self._charged
+        todo = [i for i, k in enumerate(keys) if k not in cache]
+        if not charged:
+            due = len(todo)
+        else:
+            due = sum(keys[i] not in charged for i in todo)
+            charged.difference_update(keys[i] for i in todo)
         if due and self.budget is not None:
             self.budget.spend(due)
-        self._charged.difference_update(keys[i] for i in todo)
         return todo
 
     def get(self, x: np.ndarray) -> tuple[float, np.ndarray, Any, int]:
@@ -693,16 +719,9 @@ class BatchProblem:
             g = np.stack([r[1] for r in rows])
         else:
             X, cost, g = batch
-        h = np.diag(X[1:]) - x  # the steps actually taken
-        with np.errstate(all="ignore"):
-            dc = (cost[1:] - cost[0]) / h
-            dg = ((g[1:] - g[0]) / h[:, None]).T
-        # a point where the step model breaks down (NaN mapped to +-1e3) gives huge slopes
-        for d in (dc, dg):
-            d[np.isnan(d)] = 0.0
-            np.clip(d, -1e12, 1e12, out=d)
-        self._jac[key] = dc, dg
-        return dc, dg
+        dc, dg = _fd_quotients(X, cost, np.ascontiguousarray(g))
+        self._jac[key] = dc, dg.T
+        return dc, dg.T
 
     def _with_jacobian_points(
         self, x: np.ndarray, eager: bool = True
@@ -820,7 +839,38 @@ class BatchProblem:
 def _fd_points(x: np.ndarray) -> np.ndarray:
     """``x`` and its ``k`` forward-difference neighbours (rows)."""
     k = x.size
+    steps = _FD_STEPS.get(k)
+    if steps is None:
+        steps = _FD_STEPS[k] = _FD_STEP * np.eye(k)
     X = np.empty((k + 1, k))
     X[:] = x
-    X[1:] += _FD_STEP * np.eye(k)
+    X[1:] += steps
     return X
+
+
+_FD_STEPS: dict[int, np.ndarray] = {}  # the forward-difference steps by dimension
+
+
+@njit(cache=True, error_model="numpy")
+def _fd_quotients(X, cost, g):
+    """The forward-difference quotients of the costs ``(k + 1,)`` and constraints ``(k + 1,
+    m)`` at the points ``X`` (:func:`_fd_points`, the steps as actually taken): the cost's
+    gradient ``(k,)`` and the constraints' Jacobian transposed, ``(k, m)``. A point where the
+    step model breaks down (NaN mapped to +-1e3) gives huge slopes: NaN becomes 0 and every
+    slope is clipped to +-1e12."""
+    k, m = X.shape[1], g.shape[1]
+    dc = np.empty(k)
+    dgt = np.empty((k, m))
+    for i in range(k):
+        h = X[1 + i, i] - X[0, i]
+        dc[i] = _clipped((cost[1 + i] - cost[0]) / h)
+        for j in range(m):
+            dgt[i, j] = _clipped((g[1 + i, j] - g[0, j]) / h)
+    return dc, dgt
+
+
+@njit(cache=True, error_model="numpy", inline="always")
+def _clipped(v):
+    if v != v:
+        return 0.0
+    return min(max(v, -1e12), 1e12)

@@ -429,13 +429,7 @@ class StepSearch:
         def residuals(ev):
             return np.concatenate([ev["residuals"], ev["next_residuals"]], axis=1)
 
-        prob = BatchProblem(
-            batch,
-            self.evaluations,
-            residuals,
-            lambda X: sm.pair_values(fx, fx2, X),
-            lambda X: sm.pair_residuals(fx, fx2, X),
-        )
+        prob = BatchProblem(batch, self.evaluations, residuals, *sm.solve_functions(fx, fx2))
         key = self._problem_key(fx, fx2)
         if key in memo.failed:
             return memo.failed[key], False
@@ -487,11 +481,7 @@ class StepSearch:
             return ev["cost"], ev["g"], ev
 
         prob = BatchProblem(
-            batch,
-            self.evaluations,
-            lambda ev: ev["residuals"],
-            lambda X: sm.step_values(fx, X),
-            lambda X: sm.step_residuals(fx, X),
+            batch, self.evaluations, lambda ev: ev["residuals"], *sm.solve_functions(fx)
         )
 
         def run(xs):

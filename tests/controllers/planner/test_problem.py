@@ -88,6 +88,51 @@ def test_the_compiled_values_are_the_full_evaluations_numbers(planners):
         sm.step_values(fx, x)  # a pair's coefficients for one step
 
 
+def test_a_solves_prepared_functions_give_the_same_numbers(planners):
+    """The functions a solve gets with its problem's data looked up once
+    (:meth:`StepEvaluator.solve_functions`) return, bit for bit, what the evaluator's own
+    calls return: a step, and a step with the next one."""
+    sm, fx, fx2, x = _pair(planners)
+    n = x.shape[1] // 2
+    values, residual_values = sm.solve_functions(fx)
+    X = np.ascontiguousarray(x[:, :n])
+    for a, b in zip(
+        values(X) + residual_values(X), sm.step_values(fx, X) + sm.step_residuals(fx, X)
+    ):
+        assert np.array_equal(a, b, equal_nan=True)
+    values, residual_values = sm.solve_functions(fx, fx2)
+    for a, b in zip(
+        values(x) + residual_values(x), sm.pair_values(fx, fx2, x) + sm.pair_residuals(fx, fx2, x)
+    ):
+        assert np.array_equal(a, b, equal_nan=True)
+
+
+def test_the_forward_difference_quotients_are_numpys_bit_for_bit():
+    """The compiled forward-difference quotients are those of the plain array expression, to
+    the last bit, with a model breakdown's NaN set to 0 and infinite or huge slopes clipped to
+    +-1e12."""
+    from controllers.planner.problem import _fd_points, _fd_quotients
+
+    rng = np.random.default_rng(4)
+    x = rng.standard_normal(6)
+    X = _fd_points(x)
+    cost = rng.standard_normal(7)
+    g = rng.standard_normal((7, 40))
+    g[3, 5], g[2, 7], g[4, 9], g[0, 11] = np.nan, 1e6, -1e6, np.inf
+    h = np.diag(X[1:]) - x
+    with np.errstate(all="ignore"):
+        want_c = (cost[1:] - cost[0]) / h
+        want_g = ((g[1:] - g[0]) / h[:, None]).T
+    for d in (want_c, want_g):
+        d[np.isnan(d)] = 0.0
+        np.clip(d, -1e12, 1e12, out=d)
+    dc, dgt = _fd_quotients(X, cost, g)
+    assert dc.tobytes() == want_c.tobytes()
+    assert np.ascontiguousarray(dgt.T).tobytes() == np.ascontiguousarray(want_g).tobytes()
+    assert dgt[2, 5] == 0.0 and dgt[1, 7] == 1e12 and dgt[3, 9] == -1e12
+    assert np.all(dgt[:, 11] == -1e12)
+
+
 def test_the_screen_skips_only_infeasible_rows_and_keeps_the_feasible_ones_bit_for_bit(planners):
     """With ``screen`` (the beam search's), a row whose dynamics break a constraint below it is
     left early: it is infeasible in the full evaluation too, and its scalar outputs are NaN;
