@@ -176,6 +176,11 @@ class PlannerConfig:
             solver's tolerance, the plans not bit for bit; the paper robot's preset); 0
             (the dataclass's and the classic walker's default): in the free coefficients
             themselves.
+        compiled_sqp: 1: each solve of a step (or a pair) runs in one compiled call
+            (:mod:`controllers.planner.sqp`: an SQP of SLSQP's structure whose QP and
+            iterations run next to the step kernel, without SciPy's per-iteration QP set-up
+            and the Python between evaluations); 0: SciPy's SLSQP driven from Python. The
+            same problems and acceptance test; the iterates, and so the plans, differ.
 
     The swing-foot geometry is the robot's (:attr:`envs.physics.RobotParams.retract`,
     :attr:`~envs.physics.RobotParams.arm_distance`, the simulator's rule): the planned swing
@@ -240,6 +245,7 @@ class PlannerConfig:
     beam_evaluations: int = 40000
     beam_coarse: int = 0
     gauss_newton_scaling: int = 0
+    compiled_sqp: int = 0
 
     def __new__(cls, *args: Any, **kwargs: Any) -> PlannerConfig:
         """Reject the settings that moved to :class:`envs.physics.RobotParams`, naming the
@@ -271,6 +277,7 @@ class PlannerConfig:
             "beam_evaluations": 1,
             "beam_coarse": 0,
             "gauss_newton_scaling": 0,
+            "compiled_sqp": 0,
         }
         for name, lo in ints.items():
             v = getattr(self, name)
@@ -309,7 +316,7 @@ class PlannerConfig:
             raise ValueError(
                 f"PlannerConfig.relaxed_margin = {self.relaxed_margin}; allowed: [0, 1]"
             )
-        for name in ("pairs_first", "gauss_newton_scaling"):
+        for name in ("pairs_first", "gauss_newton_scaling", "compiled_sqp"):
             if getattr(self, name) > 1:
                 raise ValueError(f"PlannerConfig.{name} = {getattr(self, name)}; allowed: 0 or 1")
         if self.beam_coarse > BEAM_SHAPES:

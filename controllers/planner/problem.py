@@ -394,6 +394,15 @@ class StepEvaluator:
             lambda X: kernel.pair_residuals(P, X, n, common, first, second),
         )
 
+    def kernel_args(self, fx: FixedStep, fx2: FixedStep | None = None) -> tuple:
+        """What :func:`controllers.planner.sqp.sqp_solve` takes of the step ``fx`` (with
+        ``fx2``: the pair): ``(P, k, common, first, second, pair)``, the kernel's arguments
+        (``second`` is ``first`` for a step alone)."""
+        _, shape_ref, first = self._problem_data(fx, False)
+        second = first if fx2 is None else self._problem_data(fx2, False)[2]
+        k = self.cfg.order - 2
+        return (self.P, k, self._common(shape_ref), first, second, fx2 is not None)
+
     def _common(self, shape_ref: np.ndarray) -> tuple:
         """What :func:`kernel.evaluate_shapes` takes that every step problem shares."""
         return (self.ref is not None, shape_ref, self.settings, self.grids, _PACK_BLOCK)
@@ -630,7 +639,9 @@ class BatchProblem:
         values: Callable[[np.ndarray], tuple[np.ndarray, np.ndarray]] | None = None,
         residual_values: Callable[[np.ndarray], tuple[np.ndarray, np.ndarray, np.ndarray]]
         | None = None,
+        compiled: tuple | None = None,
     ):
+        self.compiled = compiled
         self.fn = fn
         self.budget = budget
         self.residuals = residuals
@@ -790,8 +801,10 @@ class BatchProblem:
         """SLSQP from ``x0``; returns the final point. With ``stall``, a run that stops making
         progress towards feasibility ends early (see ``_STALL_ITERATIONS``). With ``scaled``
         (and residuals), in the coordinates of :meth:`scaling` at ``x0``."""
-        hist: list[float] = []  # constraint violation after each iteration
         T = self.scaling(x0) if scaled else None
+        if self.compiled is not None:
+            return self._minimize_compiled(x0, T, maxiter, ftol, stall)
+        hist: list[float] = []  # constraint violation after each iteration
 
         def stalled(x: np.ndarray) -> bool:
             hist.append(float(violation(self.get(x)[1])))
@@ -834,6 +847,44 @@ class BatchProblem:
             fun_z, jac_z, np.zeros_like(xs), maxiter, ftol, stalled_z if stall else None
         )
         return xs + T @ z
+
+    def _minimize_compiled(
+        self, x0: np.ndarray, T: np.ndarray | None, maxiter: int, ftol: float, stall: bool
+    ) -> np.ndarray:
+        """:meth:`minimize` in one compiled call (:func:`sqp.sqp_solve` on ``compiled``, the
+        kernel's arguments): its rows accounted in the budget; once that is spent,
+        :class:`BudgetExhausted`."""
+        from .sqp import sqp_solve
+
+        x0 = np.ascontiguousarray(x0, dtype=np.float64)
+        if T is None:
+            T = np.eye(x0.size)
+        left = _UNLIMITED
+        if self.budget is not None:
+            self.budget.spend(0)  # raises if already spent (or past its deadline)
+            left = max(self.budget.evaluations - self.budget.used, 0)
+        P, k, common, first, second, pair = self.compiled
+        rule = (
+            float(_STALL_ITERATIONS),
+            float(_STALL_WINDOW),
+            float(_STALL_GAIN),
+            float(_STALL_VIOLATION),
+        )
+        x, rows, status, _ = sqp_solve(
+            P, x0, np.ascontiguousarray(T), k, common, first, second, pair,
+            int(maxiter), float(ftol), bool(stall), int(left), rule,
+        )  # fmt: skip
+        if self.budget is not None:
+            self.budget.used += int(rows)
+            if status == 2:
+                self.budget.exhausted = True
+                raise BudgetExhausted(
+                    f"search budget exhausted after {self.budget.used} step evaluations"
+                )
+        return x
+
+
+_UNLIMITED = 2**62  # rows of a compiled solve without a budget
 
 
 def _fd_points(x: np.ndarray) -> np.ndarray:

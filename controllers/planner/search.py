@@ -429,7 +429,13 @@ class StepSearch:
         def residuals(ev):
             return np.concatenate([ev["residuals"], ev["next_residuals"]], axis=1)
 
-        prob = BatchProblem(batch, self.evaluations, residuals, *sm.solve_functions(fx, fx2))
+        prob = BatchProblem(
+            batch,
+            self.evaluations,
+            residuals,
+            *sm.solve_functions(fx, fx2),
+            sm.kernel_args(fx, fx2) if self.config.compiled_sqp else None,
+        )
         key = self._problem_key(fx, fx2)
         if key in memo.failed:
             return memo.failed[key], False
@@ -481,7 +487,11 @@ class StepSearch:
             return ev["cost"], ev["g"], ev
 
         prob = BatchProblem(
-            batch, self.evaluations, lambda ev: ev["residuals"], *sm.solve_functions(fx)
+            batch,
+            self.evaluations,
+            lambda ev: ev["residuals"],
+            *sm.solve_functions(fx),
+            sm.kernel_args(fx) if self.config.compiled_sqp else None,
         )
 
         def run(xs):
