@@ -7,7 +7,14 @@ from scipy.optimize import minimize, nnls
 
 from controllers.planner import GaitPlanner
 from controllers.planner.problem import BatchProblem, BudgetExhausted, SearchBudget
-from controllers.planner.sqp import _elastic_qp, _least_squares, _nnls, _qp, sqp_solve
+from controllers.planner.sqp import (
+    _augmented_qp,
+    _ldl_update,
+    _least_squares,
+    _nnls,
+    _qp,
+    sqp_solve,
+)
 
 from .cases import CASES, gait_step
 from .test_plan import rollout
@@ -68,7 +75,7 @@ def test_the_qp_is_a_constrained_minimum():
         g = rng.standard_normal(n)
         A = rng.standard_normal((m, n))
         c = -A @ rng.standard_normal(n) + rng.uniform(0.0, 1.0, m)  # consistent
-        d, lam, ok = _qp(B, g, A, c)
+        d, lam, ok = _qp(np.linalg.cholesky(B), g, A, c)
         assert ok
         np.testing.assert_allclose(d, _slsqp_qp(B, g, A, c), atol=1e-6)
         assert np.all(A @ d + c >= -1e-9) and np.all(lam >= 0)
@@ -77,8 +84,35 @@ def test_the_qp_is_a_constrained_minimum():
     A = np.array([[1.0, 0.0], [-1.0, 0.0]])
     c = np.array([-1.0, -1.0])  # x >= 1 and x <= -1
     assert not _qp(np.eye(2), np.zeros(2), A, c)[2]
-    d, _, ok = _elastic_qp(np.eye(2), np.zeros(2), A, c)
-    assert ok and abs(d[0]) < 1e-6  # halfway: each constraint violated by 1
+    d, _, delta, ok = _augmented_qp(np.eye(2), np.zeros(2), A, c, 100.0)
+    assert ok and abs(d[0]) < 1e-6 and delta == pytest.approx(1.0)  # both relaxed in full
+    # a constraint met stays met: x >= 1 violated, x <= 3 met
+    A = np.array([[1.0], [-1.0]])
+    c = np.array([-1.0, 3.0])
+    d, _, delta, ok = _augmented_qp(np.eye(1), np.array([-10.0]), A, c, 100.0)
+    assert ok and d[0] <= 3.0 + 1e-9
+
+
+def test_the_ldl_updates_are_the_rank_one_changes():
+    """The composite-t updates of ``L D L'`` give ``B + sigma z z'`` for an update and a
+    downdate that keeps ``B`` positive definite, and keep it positive definite where the
+    downdate would not (cut short, as SLSQP does)."""
+    rng = np.random.default_rng(3)
+    n = 6
+    M = rng.standard_normal((n, n))
+    B = M @ M.T + np.eye(n)
+    C = np.linalg.cholesky(B)
+    d0 = np.diag(C) ** 2
+    L0 = C / np.diag(C)
+    for sigma, z in [(0.7, rng.standard_normal(n)), (-0.1, 0.5 * rng.standard_normal(n))]:
+        L, D = L0.copy(), d0.copy()
+        _ldl_update(L, D, z.copy(), sigma)
+        np.testing.assert_allclose(L @ np.diag(D) @ L.T, B + sigma * np.outer(z, z), rtol=1e-10)
+        assert np.allclose(np.diag(L), 1.0) and np.all(D > 0)
+    L, D = L0.copy(), d0.copy()
+    z = 10.0 * rng.standard_normal(n)
+    _ldl_update(L, D, z, -1.0)  # B - z z' is indefinite
+    assert np.all(D > 0)
 
 
 def _solve(sm, fx, fx2, x0, compiled, budget=10**6):
