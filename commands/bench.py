@@ -6,7 +6,7 @@ planner's replanning time per footstep. Compilation and warm-up are excluded fro
 timings; each timing is the fastest of repeated runs. A full run takes about 2 minutes,
 --quick a few seconds per section. --episodes sets the episodes of the closed-loop planner rows
 (a p99 over 6 is about their second-slowest footstep), --planner the gait planner's settings of
-the planner section (e.g. beam_coarse=0, the previous default).
+the planner section (e.g. compiled_sqp=0, the previous default).
 """
 
 from __future__ import annotations
@@ -369,10 +369,10 @@ def planner_section(args: argparse.Namespace) -> list[Row]:
             value = f"{np.median(times) * 1e3:.1f}" if times else "-"
             rows.append((label, value, "ms"))
     episodes = args.episodes or (2 if args.quick else 6)
-    # the defaults, and the previous defaults (the full beam search alone, no coarse pass
-    # first) on the same courses, course by course in turn
+    # the defaults, and the previous defaults (SciPy's SLSQP driven from Python instead of the
+    # compiled SQP) on the same courses, course by course in turn
     for difficulty in (1.0, 2.0):
-        rows += _closed_loop_replanning(episodes, difficulty, [{}, {"beam_coarse": 0}], changes)
+        rows += _closed_loop_replanning(episodes, difficulty, [{}, {"compiled_sqp": 0}], changes)
     return rows
 
 
@@ -523,7 +523,7 @@ def configure(parser: argparse.ArgumentParser) -> None:
         type=key_value,
         metavar="KEY=VALUE",
         help="the gait planner's settings for the planner section (PlannerConfig fields over "
-        "the paper robot's preset, e.g. beam_coarse=0 for the previous default)",
+        "the paper robot's preset, e.g. compiled_sqp=0 for the previous default)",
     )
 
 

@@ -76,7 +76,13 @@ ADDED_SETTINGS: dict[str, Any] = {
     "foot_estimate": "mean",
     "long_segment": 0.0,
     "drop_edge_sd": 0.0,
-    "planner": {"speed_reserve": 0.0, "dip_floor": 0.0, "drop_edge_margin": 0.0, "beam_coarse": 0},
+    "planner": {
+        "speed_reserve": 0.0,
+        "dip_floor": 0.0,
+        "drop_edge_margin": 0.0,
+        "beam_coarse": 0,
+        "compiled_sqp": 0,
+    },
     "controller": {"posture_hold": False},
 }
 

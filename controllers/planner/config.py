@@ -179,8 +179,9 @@ class PlannerConfig:
         compiled_sqp: 1: each solve of a step (or a pair) runs in one compiled call
             (:mod:`controllers.planner.sqp`: an SQP of SLSQP's structure whose QP and
             iterations run next to the step kernel, without SciPy's per-iteration QP set-up
-            and the Python between evaluations); 0: SciPy's SLSQP driven from Python. The
-            same problems and acceptance test; the iterates, and so the plans, differ.
+            and the Python between evaluations; the paper robot's preset, held out); 0 (the
+            dataclass's and the classic walker's default): SciPy's SLSQP driven from Python.
+            The same problems and acceptance test; the iterates, and so the plans, differ.
 
     The swing-foot geometry is the robot's (:attr:`envs.physics.RobotParams.retract`,
     :attr:`~envs.physics.RobotParams.arm_distance`, the simulator's rule): the planned swing

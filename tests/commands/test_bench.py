@@ -18,7 +18,7 @@ def test_bench_planner_section_takes_episodes_and_planner_settings(capsys, monke
     out = " ".join(capsys.readouterr().out.split())
     assert "planner clearance=0.003" in out and "difficulty 1 (1 episodes)" in out
     # the previous defaults walk the same courses in the same run, course by course
-    assert "difficulty 2 (1 episodes), planner beam_coarse=0" in out
+    assert "difficulty 2 (1 episodes), planner compiled_sqp=0" in out
     assert "the bare env, course by course in the same run" in out
     assert main([*argv, "--planner", "clearance=-1"]) == 2
     err = capsys.readouterr().err.strip().splitlines()

@@ -247,18 +247,21 @@ def test_the_beam_search_keeps_walking_where_the_depth_first_search_runs_into_a_
     ]
 
 
-def test_the_beam_search_does_not_spend_the_relaxations_budget(gait):
+@pytest.mark.parametrize("compiled_sqp,relaxations", [(0, 2), (1, 1)])
+def test_the_beam_search_does_not_spend_the_relaxations_budget(gait, compiled_sqp, relaxations):
     """The beam search over the horizon has its own budget: where the full problem's
     depth-first search and beam fail, the relaxation gets the replanning budget the depth-first
     search left. Before, the beam's evaluations were charged to that budget too, and on this
     rise the relaxed search of the third footstep ran out of it ("search budget exhausted")
-    and left a shorter look-ahead."""
+    and left a shorter look-ahead. With SciPy's SLSQP two footsteps plan the relaxed problem;
+    with the compiled SQP one, the footstep before it keeping a shorter horizon of the full
+    problem."""
     relax = ControllerConfig(fallbacks=[{"torque_fraction": 0.8}])
-    out, _ = walk(RISE, gait, relax, {**TIGHT, "beam_width": 32})
+    out, _ = walk(RISE, gait, relax, {**TIGHT, "beam_width": 32, "compiled_sqp": compiled_sqp})
     recs = out["records"]
     assert max(r.plan_evaluations for r in recs) > relax.replan_evaluations  # the beam ran
     relaxed = [r for r in recs if (r.fallback or "").startswith("relaxed")]
-    assert [r.fallback for r in relaxed] == ["relaxed: torque_fraction=0.8"] * 2
+    assert [r.fallback for r in relaxed] == ["relaxed: torque_fraction=0.8"] * relaxations
     for r in relaxed:
         assert r.reason.startswith("full problem: planning failed")
         assert "relaxed: torque_fraction=0.8: planning failed" not in r.reason, r.reason
