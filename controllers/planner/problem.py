@@ -30,7 +30,6 @@ from dataclasses import dataclass
 from typing import Any, NamedTuple
 
 import numpy as np
-from numba import njit
 
 from envs.physics import model
 from envs.physics.params import RobotParams
@@ -43,6 +42,7 @@ from .footholds import TerrainMap
 from .kernel import StepGrids, StepGround, StepScalars, StepSettings
 from .plan import PeriodicGait
 from .slsqp import minimize_slsqp
+from .sqp import FD_STEP, fd_quotients, sqp_solve
 
 __all__ = [
     "CONSTRAINT_GROUPS",
@@ -70,7 +70,6 @@ _PACK_BLOCK = 8  # long constraint groups reach SLSQP as minima over blocks of g
 # negative constraints, above _STALL_VIOLATION) stops once its last _STALL_WINDOW iterations
 # brought the violation below _STALL_GAIN times its earlier best no more
 _STALL_ITERATIONS, _STALL_WINDOW, _STALL_GAIN, _STALL_VIOLATION = 25, 5, 0.95, 1e-4
-_FD_STEP = math.sqrt(np.finfo(float).eps)  # forward-difference step of the Jacobians
 _PROBLEMS_KEPT = 16  # step problems whose kernel data a StepEvaluator keeps
 # the scaled solves' eigenvalue floor, relative to the largest: only a guard against a
 # singular model (the eigenvalues of the paper robot's step models span a factor of about 40)
@@ -338,27 +337,21 @@ class StepEvaluator:
         """The costs ``(B,)`` and packed constraints ``(B, m)`` of :meth:`evaluate_batch` (a
         step, not the periodic gait) for the free coefficients ``free`` (``(B, k)``), in one
         compiled call: the same numbers, nothing else."""
-        _, shape_ref, problem = self._problem_data(fx, False)
-        return kernel.step_values(self.P, self._free(free), self._common(shape_ref), problem)
+        return self.solve_functions(fx)[0](self._free(free))
 
     def step_residuals(
         self, fx: FixedStep, free: np.ndarray
     ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """:meth:`step_values` and the cost's terms ``(B, R)`` (``evaluate_batch``'s
         ``"residuals"``), in one compiled call: the same numbers."""
-        _, shape_ref, problem = self._problem_data(fx, False)
-        return kernel.step_residuals(self.P, self._free(free), self._common(shape_ref), problem)
+        return self.solve_functions(fx)[1](self._free(free))
 
     def pair_residuals(
         self, fx: FixedStep, fx2: FixedStep, free: np.ndarray
     ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """:meth:`pair_values` and the pair's cost terms ``(B, R + R2)``, the first step's then
         the second's, in one compiled call: the same numbers."""
-        _, shape_ref, first = self._problem_data(fx, False)
-        second = self._problem_data(fx2, False)[2]
-        return kernel.pair_residuals(
-            self.P, self._free(free, 2), self.cfg.order - 2, self._common(shape_ref), first, second
-        )
+        return self.solve_functions(fx, fx2)[1](self._free(free, 2))
 
     def pair_values(
         self, fx: FixedStep, fx2: FixedStep, free: np.ndarray
@@ -367,37 +360,32 @@ class StepEvaluator:
         steps' free coefficients, ``(B, 2 k)``): the sum of their costs and their constraints
         side by side, the second step starting where the first ends row by row (the impact's
         ``theta_dot`` and slope; ``fx2``'s start is ignored)."""
-        _, shape_ref, first = self._problem_data(fx, False)
-        second = self._problem_data(fx2, False)[2]
-        return kernel.pair_values(
-            self.P, self._free(free, 2), self.cfg.order - 2, self._common(shape_ref), first, second
-        )
+        return self.solve_functions(fx, fx2)[0](self._free(free, 2))
 
     def solve_functions(
         self, fx: FixedStep, fx2: FixedStep | None = None
     ) -> tuple[Callable[[np.ndarray], tuple], Callable[[np.ndarray], tuple]]:
-        """:meth:`step_values` and :meth:`step_residuals` of the step ``fx`` (with ``fx2``:
-        :meth:`pair_values` and :meth:`pair_residuals` of the pair), as :class:`BatchProblem`
-        takes them, with the problem's kernel data looked up once: for the points of one
-        solve, which changes neither the weights nor the reference. The same numbers; the
-        points must be ``(B, k)`` float64 rows of the right width (a solve's are)."""
-        _, shape_ref, first = self._problem_data(fx, False)
-        P, common = self.P, self._common(shape_ref)
-        if fx2 is None:
+        """The compiled values and residual values of the step ``fx`` (with ``fx2``: the
+        pair), :meth:`step_values` and :meth:`step_residuals` (:meth:`pair_values` and
+        :meth:`pair_residuals`), with the problem's kernel data looked up once: as
+        :class:`BatchProblem` takes them for the points of one solve, which changes neither
+        the weights nor the reference. The points must be ``(B, k)`` float64 rows of the right
+        width (a solve's are)."""
+        P, k, common, first, second, pair = self.kernel_args(fx, fx2)
+        if not pair:
             return (
                 lambda X: kernel.step_values(P, X, common, first),
                 lambda X: kernel.step_residuals(P, X, common, first),
             )
-        second, n = self._problem_data(fx2, False)[2], self.cfg.order - 2
         return (
-            lambda X: kernel.pair_values(P, X, n, common, first, second),
-            lambda X: kernel.pair_residuals(P, X, n, common, first, second),
+            lambda X: kernel.pair_values(P, X, k, common, first, second),
+            lambda X: kernel.pair_residuals(P, X, k, common, first, second),
         )
 
     def kernel_args(self, fx: FixedStep, fx2: FixedStep | None = None) -> tuple:
-        """What :func:`controllers.planner.sqp.sqp_solve` takes of the step ``fx`` (with
-        ``fx2``: the pair): ``(P, k, common, first, second, pair)``, the kernel's arguments
-        (``second`` is ``first`` for a step alone)."""
+        """The kernel's arguments for the step ``fx`` (with ``fx2``: the pair), as
+        :func:`controllers.planner.sqp.sqp_solve` takes them: ``(P, k, common, first, second,
+        pair)`` (``k`` free coefficients a step; ``second`` is ``first`` for a step alone)."""
         _, shape_ref, first = self._problem_data(fx, False)
         second = first if fx2 is None else self._problem_data(fx2, False)[2]
         k = self.cfg.order - 2
@@ -730,7 +718,7 @@ class BatchProblem:
             g = np.stack([r[1] for r in rows])
         else:
             X, cost, g = batch
-        dc, dg = _fd_quotients(X, cost, np.ascontiguousarray(g))
+        dc, dg = fd_quotients(X, cost, np.ascontiguousarray(g))
         self._jac[key] = dc, dg.T
         return dc, dg.T
 
@@ -854,8 +842,6 @@ class BatchProblem:
         """:meth:`minimize` in one compiled call (:func:`sqp.sqp_solve` on ``compiled``, the
         kernel's arguments): its rows accounted in the budget; once that is spent,
         :class:`BudgetExhausted`."""
-        from .sqp import sqp_solve
-
         x0 = np.ascontiguousarray(x0, dtype=np.float64)
         if T is None:
             T = np.eye(x0.size)
@@ -890,38 +876,13 @@ _UNLIMITED = 2**62  # rows of a compiled solve without a budget
 def _fd_points(x: np.ndarray) -> np.ndarray:
     """``x`` and its ``k`` forward-difference neighbours (rows)."""
     k = x.size
-    steps = _FD_STEPS.get(k)
+    steps = FD_STEPS.get(k)
     if steps is None:
-        steps = _FD_STEPS[k] = _FD_STEP * np.eye(k)
+        steps = FD_STEPS[k] = FD_STEP * np.eye(k)
     X = np.empty((k + 1, k))
     X[:] = x
     X[1:] += steps
     return X
 
 
-_FD_STEPS: dict[int, np.ndarray] = {}  # the forward-difference steps by dimension
-
-
-@njit(cache=True, error_model="numpy")
-def _fd_quotients(X, cost, g):
-    """The forward-difference quotients of the costs ``(k + 1,)`` and constraints ``(k + 1,
-    m)`` at the points ``X`` (:func:`_fd_points`, the steps as actually taken): the cost's
-    gradient ``(k,)`` and the constraints' Jacobian transposed, ``(k, m)``. A point where the
-    step model breaks down (NaN mapped to +-1e3) gives huge slopes: NaN becomes 0 and every
-    slope is clipped to +-1e12."""
-    k, m = X.shape[1], g.shape[1]
-    dc = np.empty(k)
-    dgt = np.empty((k, m))
-    for i in range(k):
-        h = X[1 + i, i] - X[0, i]
-        dc[i] = _clipped((cost[1 + i] - cost[0]) / h)
-        for j in range(m):
-            dgt[i, j] = _clipped((g[1 + i, j] - g[0, j]) / h)
-    return dc, dgt
-
-
-@njit(cache=True, error_model="numpy", inline="always")
-def _clipped(v):
-    if v != v:
-        return 0.0
-    return min(max(v, -1e12), 1e12)
+FD_STEPS: dict[int, np.ndarray] = {}  # the forward-difference steps by dimension

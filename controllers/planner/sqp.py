@@ -36,7 +36,7 @@ from numba import njit
 
 from . import kernel
 
-__all__ = ["SQP_STATUS", "sqp_solve"]
+__all__ = ["FD_STEP", "SQP_STATUS", "fd_quotients", "sqp_solve"]
 
 _jit = njit(cache=True, error_model="numpy")
 
@@ -53,7 +53,8 @@ SQP_STATUS = {
 
 _AUGMENT = 100.0  # SLSQP's first weight of the augmented variable (x 10 per retry, 5 retries)
 _EPS = float(np.finfo(np.float64).eps)
-_FD_STEP = math.sqrt(_EPS)
+#: forward-difference step of the Jacobians (the solves' and :class:`.problem.BatchProblem`'s)
+FD_STEP = math.sqrt(_EPS)
 _ARMIJO = 0.1  # sufficient decrease of the merit function, fraction of its slope
 _LINE_TRIALS = 10  # a line search accepts its point after this many shortened ones
 _ALPHA_MIN = 0.1  # least shortening of a line search's step
@@ -352,6 +353,24 @@ def _violation(c):
 
 
 @_jit
+def fd_quotients(X, cost, g):
+    """The forward-difference quotients of the costs ``(k + 1,)`` and constraints ``(k + 1,
+    m)`` at the points ``X`` (a point, then its ``k`` neighbours one coordinate each, the steps
+    as actually taken): the cost's gradient ``(k,)`` and the constraints' Jacobian transposed,
+    ``(k, m)``. A point where the step model breaks down (NaN mapped to +-1e3) gives huge
+    slopes: NaN becomes 0 and every slope is clipped to +-1e12."""
+    k, m = X.shape[1], g.shape[1]
+    dc = np.empty(k)
+    dgt = np.empty((k, m))
+    for i in range(k):
+        h = X[1 + i, i] - X[0, i]
+        dc[i] = _clipped((cost[1 + i] - cost[0]) / h)
+        for j in range(m):
+            dgt[i, j] = _clipped((g[1 + i, j] - g[0, j]) / h)
+    return dc, dgt
+
+
+@_jit
 def _clipped(v):
     if v != v:
         return 0.0
@@ -360,26 +379,25 @@ def _clipped(v):
 
 # ---------------------------------------------------------------------------- solve
 @_jit
-def _jacobian(P, x0, T, z, f, c, k1, common, first, second, pair, X, grad, A):
+def _jacobian(P, x0, T, z, f, c, k1, common, first, second, pair, X, cost, g, grad, A):
     """The gradient and constraint Jacobian at ``z`` (cost ``f``, constraints ``c``) in ``z``:
-    forward differences in the free coefficients ``x = x0 + T z`` (``n`` kernel rows), as
-    :class:`.problem.BatchProblem` takes them, mapped through ``T``."""
+    forward differences in the free coefficients ``x = x0 + T z`` (``n`` kernel rows;
+    :func:`fd_quotients`, as :class:`.problem.BatchProblem` takes them), mapped through
+    ``T``. ``X``, ``cost``, ``g``: work arrays of ``n + 1`` rows."""
     n = z.size
-    m = c.size
     x = x0 + T @ z
-    for i in range(n):
+    for i in range(n + 1):
         X[i] = x
-        X[i, i] += _FD_STEP
-    cf, gf = _values(P, X, k1, common, first, second, pair)
-    gx = np.empty(n)
-    Ax = np.empty((m, n))
     for i in range(n):
-        h = X[i, i] - x[i]
-        gx[i] = _clipped((cf[i] - f) / h)
-        for j in range(m):
-            Ax[j, i] = _clipped((gf[i, j] - c[j]) / h)
+        X[1 + i, i] += FD_STEP
+    cf, gf = _values(P, X[1:], k1, common, first, second, pair)
+    cost[0] = f
+    cost[1:] = cf
+    g[0] = c
+    g[1:] = gf
+    gx, Axt = fd_quotients(X, cost, g)
     grad[:] = T.T @ gx
-    A[:, :] = Ax @ T
+    A[:, :] = np.ascontiguousarray(Axt.T) @ T
 
 
 @_jit
@@ -419,7 +437,6 @@ def sqp_solve(P, x0, T, k1, common, first, second, pair, maxiter, ftol, stall, b
     """
     n = x0.size
     s_iter, s_window, s_gain, s_viol = stall_rule
-    X = np.empty((n, n))
     if budget < 1 + n:
         return x0.copy(), 0, 2, 0
     cost, g = _values(P, x0.reshape(1, n), k1, common, first, second, pair)
@@ -430,7 +447,10 @@ def sqp_solve(P, x0, T, k1, common, first, second, pair, maxiter, ftol, stall, b
     z = np.zeros(n)
     grad = np.zeros(n)
     A = np.zeros((m, n))
-    _jacobian(P, x0, T, z, f, c, k1, common, first, second, pair, X, grad, A)
+    X = np.empty((n + 1, n))
+    cost_fd = np.empty(n + 1)
+    g_fd = np.empty((n + 1, m))
+    _jacobian(P, x0, T, z, f, c, k1, common, first, second, pair, X, cost_fd, g_fd, grad, A)
     rows += n
     L = np.eye(n)
     D = np.ones(n)
@@ -530,7 +550,7 @@ def sqp_solve(P, x0, T, k1, common, first, second, pair, maxiter, ftol, stall, b
         if rows + n > budget:
             status = 2
             break
-        _jacobian(P, x0, T, z, f, c, k1, common, first, second, pair, X, grad, A)
+        _jacobian(P, x0, T, z, f, c, k1, common, first, second, pair, X, cost_fd, g_fd, grad, A)
         rows += n
         y = grad - A.T @ lam - gl_old
         Bs = L @ (D * (L.T @ step))

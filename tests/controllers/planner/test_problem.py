@@ -111,7 +111,8 @@ def test_the_forward_difference_quotients_are_numpys_bit_for_bit():
     """The compiled forward-difference quotients are those of the plain array expression, to
     the last bit, with a model breakdown's NaN set to 0 and infinite or huge slopes clipped to
     +-1e12."""
-    from controllers.planner.problem import _fd_points, _fd_quotients
+    from controllers.planner.problem import _fd_points
+    from controllers.planner.sqp import fd_quotients as _fd_quotients
 
     rng = np.random.default_rng(4)
     x = rng.standard_normal(6)
