@@ -45,7 +45,7 @@ SQP_STATUS = {
     0: "converged",
     1: "iteration limit",
     2: "evaluation budget spent",
-    3: "line search failed",
+    3: "the line search's point broke the model (a cost not finite)",
     4: "QP failed",
     5: "stalled",
     6: "no descent direction",
@@ -482,13 +482,11 @@ def sqp_solve(P, x0, T, k1, common, first, second, pair, maxiter, ftol, stall, b
         # SLSQP's KKT test, and Powell's penalties
         gs = np.dot(grad, d)
         h1 = abs(gs)
-        h2 = 0.0
         for j in range(m):
-            h2 += max(-c[j], 0.0)
             lj = abs(lam[j])
             mu[j] = max(lj, 0.5 * (mu[j] + lj))
             h1 += lj * abs(c[j])
-        if h1 < ftol and h2 < ftol and not badlin and f == f:
+        if h1 < ftol and viol < ftol and not badlin and f == f:
             status = 0
             break
         pen = _merit_penalty(c, mu)
@@ -496,10 +494,8 @@ def sqp_solve(P, x0, T, k1, common, first, second, pair, maxiter, ftol, stall, b
         slope = gs - pen * h4
         if slope >= 0.0 or slope != slope:  # no descent: a fresh model
             resets += 1
-            if resets > _RESETS:
-                viol = _violation(c)
-                tol = 10.0 * ftol
-                status = 0 if viol < tol and not badlin else 6
+            if resets > _RESETS:  # SLSQP's relaxed test
+                status = 0 if viol < 10.0 * ftol and not badlin else 6
                 break
             L, D = np.eye(n), np.ones(n)
             continue
