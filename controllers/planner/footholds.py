@@ -13,7 +13,6 @@ form narrow windows; one on the border of its window leaves no next step after a
 from __future__ import annotations
 
 import functools
-import itertools
 import math
 from collections.abc import Sequence
 from dataclasses import dataclass
@@ -36,7 +35,8 @@ __all__ = [
 _CHAIN_DEPTH = 3  # footholds looked ahead when ranking candidates
 _CHAIN_STRIDE = 4  # candidates tried first when looking for a chain (then all of them)
 _LANDING_SLACK = (0.008, 0.004)  # touchdown errors a foothold chain should tolerate [m]
-_MEMO_LIMIT = 65536  # entries of a chain memo before it is cleared
+_MEMO_LIMIT = 65536  # entries of a foothold memo before it is cleared
+_MEMO_TERRAINS = 4  # terrains whose chain lengths are kept
 
 
 class TerrainMap:
@@ -266,8 +266,12 @@ class FootholdChains:
         self.relaxed = relaxed
         self.l = l
         self.spacing = spacing
-        self.lengths: dict[tuple, int] = {}  # chain lengths, see reach()
         self.footholds: dict[tuple, tuple[np.ndarray, str]] = {}  # see chain_footholds()
+        self._rules_arr = _rules_array(rules)
+        self._relaxed_arr = _rules_array(relaxed if relaxed is not None else rules)
+        # chain lengths by terrain: (first position [mm], lengths [position, depth, relaxed],
+        # -1 where not known yet), see reach()
+        self._lengths: dict[bytes, tuple[int, np.ndarray]] = {}
 
     def ranked(
         self,
@@ -399,21 +403,31 @@ class FootholdChains:
         if depth <= 0:
             return 0
         relaxed = relaxed and self.relaxed is not None  # without relaxed rules: the same chains
-        key = (tmap.key, round(float(x), 3), depth, relaxed)
-        hit = self.lengths.get(key)
-        if hit is not None:
-            return hit
-        cx, _ = self.chain_footholds(tmap, x, relaxed)
-        best = 0
-        # every _CHAIN_STRIDE-th candidate first: on passable ground one of them continues
-        for c in itertools.chain(cx[:: max(1, _CHAIN_STRIDE)], cx):  # (lazily: most stop early)
-            best = max(best, 1 + self.reach(tmap, float(c), depth - 1, relaxed))
-            if best >= depth:
-                break
-        if len(self.lengths) > _MEMO_LIMIT:
-            self.lengths.clear()
-        self.lengths[key] = best
-        return best
+        k0, memo = self._memo(tmap, depth)
+        k = round(round(float(x), 3) * 1000) - k0
+        if 0 <= k < memo.shape[0]:
+            hit = memo[k, depth, int(relaxed)]
+            if hit >= 0:
+                return int(hit)
+        return int(
+            _chain_reach(
+                k, depth, int(relaxed), memo, k0, self._rules_arr, self._relaxed_arr, tmap.xs,
+                tmap.ys, tmap.features, tmap._face_arr, float(self.l),
+            )
+        )  # fmt: skip
+
+    def _memo(self, tmap: TerrainMap, depth: int) -> tuple[int, np.ndarray]:
+        """The chain lengths known on ``tmap`` (see :meth:`reach`), with room for ``depth``."""
+        hit = self._lengths.get(tmap.key)
+        if hit is None or hit[1].shape[1] <= depth:
+            if hit is None and len(self._lengths) >= _MEMO_TERRAINS:
+                self._lengths.clear()
+            # stance feet from the map's start to a horizon's steps past its end
+            k0 = math.floor(float(tmap.xs[0]) * 1000) - 1000
+            k1 = math.ceil(float(tmap.xs[-1]) * 1000) + 1000 + 1000 * _CHAIN_DEPTH
+            size = max(depth, 2 * _CHAIN_DEPTH) + 1
+            hit = self._lengths[tmap.key] = (k0, np.full((k1 - k0, size, 2), -1, np.int8))
+        return hit
 
     def reach_break(self, tmap: TerrainMap, x: float, depth: int, relaxed: bool = False) -> str:
         """Why the longest chain of footholds from ``x`` [m] ends (see :meth:`reach`)."""
@@ -495,3 +509,60 @@ def _foothold_table(
     seen[2] = 1.0 if np.any(ok_edge & ok_reach) else 0.0
     seen[3], seen[4] = dh.min(), dh.max()
     return x[order[:m]], y[order[:m]], seen
+
+
+def _rules_array(rules: FootholdRules) -> np.ndarray:
+    """The rules as :func:`_chain_reach` takes them."""
+    n = int(math.floor((rules.step_max - rules.step_min) / rules.resolution)) + 1
+    return np.array(
+        [
+            n, rules.step_min, rules.resolution, rules.edge_margin, rules.drop_margin,
+            rules.rise_margin, rules.drop_edge_margin, rules.max_rise, rules.max_drop,
+            rules.q1_min, rules.q1_max, rules.step_length,
+        ],
+        dtype=np.float64,
+    )  # fmt: skip
+
+
+@njit(cache=True, error_model="numpy")
+def _chain_table(x, R, tx, ty, features, faces, l):
+    """The admissible footholds from a stance foot at ``x`` [m] under the rules ``R``
+    (:func:`_rules_array`), ranked by step length (:func:`candidate_footholds`)."""
+    y = terrain_height(tx, ty, tx.size, x)
+    cx, _, _ = _foothold_table(
+        x, y, int(R[0]), R[1], R[2], tx, ty, features, faces, R[3], R[4], R[5], R[6], R[7],
+        R[8], R[9], R[10], l, R[11], math.nan, math.nan, 0,
+    )  # fmt: skip
+    return cx
+
+
+@njit(cache=True, error_model="numpy")
+def _chain_reach(k, depth, relaxed, memo, k0, rules, relaxed_rules, tx, ty, features, faces, l):
+    """:meth:`FootholdChains.reach` from the stance foot at ``(k0 + k)`` mm, memoised in
+    ``memo[k, depth, relaxed]`` (positions outside ``memo`` are not kept)."""
+    if depth <= 0:
+        return 0
+    inside = 0 <= k < memo.shape[0]
+    if inside and memo[k, depth, relaxed] >= 0:
+        return int(memo[k, depth, relaxed])
+    x = (k0 + k) / 1000.0
+    cx = _chain_table(x, rules, tx, ty, features, faces, l)
+    if cx.size == 0 and relaxed == 1:
+        cx = _chain_table(x, relaxed_rules, tx, ty, features, faces, l)
+    best = 0
+    # every _CHAIN_STRIDE-th candidate first: on passable ground one of them continues
+    for p in range(2):
+        step = _CHAIN_STRIDE if p == 0 else 1
+        for i in range(0, cx.size, step):
+            kc = int(np.round(cx[i] * 1000.0)) - k0
+            r = _chain_reach(
+                kc, depth - 1, relaxed, memo, k0, rules, relaxed_rules, tx, ty, features, faces, l
+            )
+            best = max(best, 1 + r)
+            if best >= depth:
+                break
+        if best >= depth:
+            break
+    if inside:
+        memo[k, depth, relaxed] = best
+    return best

@@ -22,6 +22,7 @@ evaluated in one batched call.
 
 from __future__ import annotations
 
+import functools
 import math
 import time
 from collections import namedtuple
@@ -232,6 +233,56 @@ def gait_reference(gait: PeriodicGait) -> GaitReference:
     )
 
 
+@functools.lru_cache(maxsize=32)
+def _step_tables(params: RobotParams, config: PlannerConfig) -> tuple[StepGrids, StepSettings]:
+    """The grids and settings of a :class:`StepEvaluator`: fixed by the robot and the planner
+    settings, built once for each (planning calls make an evaluator each; the kernels only read
+    them)."""
+    P = params.vector()
+    n, m = config.grid, config.order
+    s = rd.step_fractions(n)
+    B = [bernstein_basis(m, s, d) for d in range(3)]
+    l = params.l  # noqa: E741
+    alpha_scale = model.mass_matrix(P, 0.0)[2]
+    u_lim = config.torque_fraction * params.u_max
+    # uniform grid for the geometric checks (swing-foot clearance, faces, theta_dot^2)
+    sg = np.linspace(0.0, 1.0, config.check_points + 1)
+    Bg = bernstein_basis(m, sg, 0)
+    interp = np.polynomial.chebyshev.chebvander(2.0 * sg - 1.0, n) @ np.linalg.inv(
+        np.polynomial.chebyshev.chebvander(rd.cheb_nodes(n), n)
+    )
+    ramp = np.minimum(1.0, (1.0 - sg) / config.clearance_ramp)
+    clear_req = config.clearance * ramp
+    qint = np.ascontiguousarray(rd.cumulative_integral_matrix(n))
+    grids = StepGrids(s, B[0], B[1], B[2], sg, Bg, qint, interp, clear_req)
+    settings = StepSettings(
+        min_thetadot=config.min_thetadot,
+        dip_floor=config.dip_floor,
+        alpha_scale=alpha_scale,
+        u_lim=u_lim,
+        u_max=params.u_max,
+        retract=params.retract * l,
+        arm=params.arm_distance * l,
+        arm_clearance=config.arm_clearance,
+        clearance=config.clearance,
+        clearance_ramp=config.clearance_ramp,
+        retracted_clearance=config.retracted_clearance,
+        face_clearance=config.face_clearance,
+        touchdown_slope=config.touchdown_slope,
+        friction=config.friction,
+        duration_min=config.duration_min,
+        duration_max=config.duration_max,
+        weight=model.weight(P),
+        mass=params.total_mass,
+        w_speed=config.w_speed,
+        w_torque=config.w_torque,
+        w_end=config.w_end,
+        w_slope=config.w_slope,
+        w_shape=config.w_shape,
+    )
+    return grids, StepSettings(*(float(v) for v in settings))
+
+
 class StepEvaluator:
     """Vectorised evaluation of one step's constraints and cost for the free coefficients.
 
@@ -249,54 +300,13 @@ class StepEvaluator:
     def __init__(self, params: RobotParams, config: PlannerConfig, tmap: TerrainMap):
         self.params, self.cfg, self.tmap = params, config, tmap
         self.P = params.vector()
-        n, m = config.grid, config.order
-        s = rd.step_fractions(n)
-        B = [bernstein_basis(m, s, d) for d in range(3)]
-        l = params.l  # noqa: E741
-        self.l = l
-        alpha_scale = model.mass_matrix(self.P, 0.0)[2]
-        u_lim = config.torque_fraction * params.u_max
-        # uniform grid for the geometric checks (swing-foot clearance, faces, theta_dot^2)
-        sg = np.linspace(0.0, 1.0, config.check_points + 1)
-        Bg = bernstein_basis(m, sg, 0)
-        interp = np.polynomial.chebyshev.chebvander(2.0 * sg - 1.0, n) @ np.linalg.inv(
-            np.polynomial.chebyshev.chebvander(rd.cheb_nodes(n), n)
-        )
-        ramp = np.minimum(1.0, (1.0 - sg) / config.clearance_ramp)
-        clear_req = config.clearance * ramp
-        qint = np.ascontiguousarray(rd.cumulative_integral_matrix(n))
-        self.grids = StepGrids(s, B[0], B[1], B[2], sg, Bg, qint, interp, clear_req)
+        self.l = params.l
+        self.grids, self.settings = _step_tables(params, config)
         self.ref: GaitReference | None = None
         self.wscale = 1.0
         self._face_cache: dict[tuple, tuple[StepGround, float, float]] = {}
         self._layouts: dict[tuple, ConstraintLayout] = {}
         self._problems: dict[tuple, tuple] = {}  # see _problem_data
-        settings = StepSettings(
-            min_thetadot=config.min_thetadot,
-            dip_floor=config.dip_floor,
-            alpha_scale=alpha_scale,
-            u_lim=u_lim,
-            u_max=params.u_max,
-            retract=params.retract * l,
-            arm=params.arm_distance * l,
-            arm_clearance=config.arm_clearance,
-            clearance=config.clearance,
-            clearance_ramp=config.clearance_ramp,
-            retracted_clearance=config.retracted_clearance,
-            face_clearance=config.face_clearance,
-            touchdown_slope=config.touchdown_slope,
-            friction=config.friction,
-            duration_min=config.duration_min,
-            duration_max=config.duration_max,
-            weight=model.weight(self.P),
-            mass=params.total_mass,
-            w_speed=config.w_speed,
-            w_torque=config.w_torque,
-            w_end=config.w_end,
-            w_slope=config.w_slope,
-            w_shape=config.w_shape,
-        )
-        self.settings = StepSettings(*(float(v) for v in settings))
 
     def evaluate(self, fx: FixedStep, free: np.ndarray, periodic: bool = False) -> dict[str, Any]:
         """Everything about the step with free coefficients ``free`` (shape ``(k,)``).

@@ -138,6 +138,10 @@ def test_chain_lengths_match_an_exhaustive_search(terrain):
         ref = brute_reach(tmap, x, 2, cfg.rules(), 0.32)
         assert chains.reach(tmap, x, 2) == ref
         assert chains.chain(tmap, x, 2) == (ref >= 2)
+    # stance feet far off the map, and a deeper horizon after shallower ones (a larger memo)
+    for x in (float(tmap.xs[0]) - 3.0, float(tmap.xs[-1]) + 3.0):
+        assert chains.reach(tmap, x, 2) == brute_reach(tmap, x, 2, cfg.rules(), 0.32)
+    assert chains.reach(tmap, 0.3, 3) == brute_reach(tmap, 0.3, 3, cfg.rules(), 0.32)
     wall = TerrainMap(Terrain.stairs([0.4], [0.3]))
     assert chains.reach(wall, 0.0, 5) < 5
     assert "no admissible foothold" in chains.reach_break(wall, 0.0, 5)
