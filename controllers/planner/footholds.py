@@ -35,6 +35,7 @@ __all__ = [
 _CHAIN_DEPTH = 3  # footholds looked ahead when ranking candidates
 _CHAIN_STRIDE = 4  # candidates tried first when looking for a chain (then all of them)
 _LANDING_SLACK = (0.008, 0.004)  # touchdown errors a foothold chain should tolerate [m]
+_SLACK = np.array(_LANDING_SLACK)
 _MEMO_LIMIT = 65536  # entries of a foothold memo before it is cleared
 _MEMO_TERRAINS = 4  # terrains whose chain lengths are kept
 
@@ -310,14 +311,13 @@ class FootholdChains:
         reach = stance[0] + (depth + 1) * rules.step_max + max(_LANDING_SLACK) + 2.0 * l
         f = tmap.features
         ranked = depth > 0 and np.any((f > stance[0] - rules.step_max) & (f < reach))
-        rank = np.full(cx.size, -1 if ranked else 0)  # -1: not ranked (yet)
-        near = np.zeros(0, dtype=int)
-        if warm_x is not None:
-            near = np.nonzero(np.abs(cx - warm_x) < rules.resolution)[0]
-        for k in near:
-            if rank[k] < 0:
-                rank[k] = self.landing_rank(tmap, float(cx[k]), depth)
-        picks: list[int] = []
+        k0, memo = self._memo(tmap, depth)
+        rank, first = _rank_candidates(
+            cx, math.nan if warm_x is None else float(warm_x), rules.resolution, int(need),
+            float(self.spacing), depth, bool(ranked), memo, k0, self._rules_arr,
+            self._relaxed_arr, tmap.xs, tmap.ys, tmap.features, tmap._face_arr, float(self.l),
+        )  # fmt: skip
+        picks: list[int] = [int(k) for k in first]
 
         def offer(k: int) -> bool:
             """Pick candidate ``k`` if it is spaced from the picks; whether the picks are done."""
@@ -325,13 +325,6 @@ class FootholdChains:
                 picks.append(k)
             return len(picks) >= need
 
-        if near.size:  # the first match in the ranked list
-            offer(int(min(near, key=lambda k: (rank[k], k))))
-        for k in range(cx.size):  # the best rank first: rank-0 candidates in list order
-            if rank[k] < 0:
-                rank[k] = self.landing_rank(tmap, float(cx[k]), depth)
-            if rank[k] == 0 and offer(k):
-                break
         done = rank >= 0
         order = np.r_[
             np.nonzero(done)[0][np.argsort(rank[done], kind="stable")], np.nonzero(~done)[0]
@@ -347,14 +340,13 @@ class FootholdChains:
         """0 if a chain of ``depth`` footholds continues from ``x`` [m] however far the foot
         lands off by up to the largest ``_LANDING_SLACK``, 1 for the next smaller slack, ...,
         ``len(_LANDING_SLACK)`` with no slack, one more without any chain."""
-        if not self.chain(tmap, x, depth):
-            return len(_LANDING_SLACK) + 1
-        r = 0
-        for s in _LANDING_SLACK:  # largest landing error the chain tolerates, first
-            if self.chain(tmap, x - s, depth) and self.chain(tmap, x + s, depth):
-                break
-            r += 1
-        return r
+        k0, memo = self._memo(tmap, depth)
+        return int(
+            _landing_rank(
+                float(x), depth, memo, k0, self._rules_arr, self._relaxed_arr, tmap.xs, tmap.ys,
+                tmap.features, tmap._face_arr, float(self.l),
+            )
+        )  # fmt: skip
 
     def chain(self, tmap: TerrainMap, x: float, depth: int) -> bool:
         """Whether ``depth`` consecutive admissible footholds exist from a stance foot at ``x``
@@ -566,3 +558,67 @@ def _chain_reach(k, depth, relaxed, memo, k0, rules, relaxed_rules, tx, ty, feat
     if inside:
         memo[k, depth, relaxed] = best
     return best
+
+
+@njit(cache=True, error_model="numpy")
+def _landing_rank(x, depth, memo, k0, rules, relaxed_rules, tx, ty, features, faces, l):
+    """:meth:`FootholdChains.landing_rank` of a foothold at ``x`` [m] (the rules' chains)."""
+    args = (memo, k0, rules, relaxed_rules, tx, ty, features, faces, l)
+    if _chain_reach(int(np.round(x * 1000.0)) - k0, depth, 0, *args) < depth:
+        return _SLACK.size + 1
+    r = 0
+    for s in _SLACK:  # largest landing error the chain tolerates, first
+        lo = _chain_reach(int(np.round((x - s) * 1000.0)) - k0, depth, 0, *args)
+        if (
+            lo >= depth
+            and _chain_reach(int(np.round((x + s) * 1000.0)) - k0, depth, 0, *args) >= depth
+        ):
+            break
+        r += 1
+    return r
+
+
+@njit(cache=True, error_model="numpy")
+def _rank_candidates(
+    cx, warm_x, res, need, spacing, depth, ranked, memo, k0, rules, relaxed_rules, tx, ty,
+    features, faces, l,
+):  # fmt: skip
+    """The ranks and first picks of :meth:`FootholdChains.ranked` (``warm_x`` NaN: none): the
+    candidate within ``res`` [m] of ``warm_x`` with the best rank, then rank-0 candidates in
+    list order, ranked lazily until ``need`` picks ``spacing`` [m] apart are found (ranks not
+    computed stay -1; without ``ranked`` every rank is 0)."""
+    n = cx.size
+    rank = np.full(n, -1 if ranked else 0, dtype=np.int64)
+    picks = np.empty(max(need, 0), dtype=np.int64)
+    args = (memo, k0, rules, relaxed_rules, tx, ty, features, faces, l)
+    best = -1
+    for k in range(n):  # the first match of the warm start in the ranked list
+        if abs(cx[k] - warm_x) < res:
+            if rank[k] < 0:
+                rank[k] = _landing_rank(cx[k], depth, *args)
+            if best < 0 or rank[k] < rank[best]:
+                best = k
+    npk = 0
+    if best >= 0:
+        npk = _offer(best, cx, picks, npk, need, spacing)
+    for k in range(n):  # the best rank first: rank-0 candidates in list order
+        if rank[k] < 0:
+            rank[k] = _landing_rank(cx[k], depth, *args)
+        if rank[k] == 0:
+            npk = _offer(k, cx, picks, npk, need, spacing)
+            if npk >= need:
+                break
+    return rank, picks[:npk]
+
+
+@njit(cache=True, error_model="numpy")
+def _offer(k, cx, picks, npk, need, spacing):
+    """Pick candidate ``k`` if there is room and it is ``spacing`` [m] from the picks; the
+    number of picks."""
+    if npk >= need:
+        return npk
+    for p in range(npk):
+        if not abs(cx[k] - cx[picks[p]]) >= spacing:
+            return npk
+    picks[npk] = k
+    return npk + 1
