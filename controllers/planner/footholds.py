@@ -34,8 +34,7 @@ __all__ = [
 
 _CHAIN_DEPTH = 3  # footholds looked ahead when ranking candidates
 _CHAIN_STRIDE = 4  # candidates tried first when looking for a chain (then all of them)
-_LANDING_SLACK = (0.008, 0.004)  # touchdown errors a foothold chain should tolerate [m]
-_SLACK = np.array(_LANDING_SLACK)
+_LANDING_SLACK = np.array([0.008, 0.004])  # touchdown errors a foothold chain should tolerate [m]
 _MEMO_LIMIT = 65536  # entries of a foothold memo before it is cleared
 _MEMO_TERRAINS = 4  # terrains whose chain lengths are kept
 
@@ -396,7 +395,7 @@ class FootholdChains:
             return 0
         relaxed = relaxed and self.relaxed is not None  # without relaxed rules: the same chains
         k0, memo = self._memo(tmap, depth)
-        k = round(round(float(x), 3) * 1000) - k0
+        k = _millimetres(float(x)) - k0
         if 0 <= k < memo.shape[0]:
             hit = memo[k, depth, int(relaxed)]
             if hit >= 0:
@@ -529,6 +528,12 @@ def _chain_table(x, R, tx, ty, features, faces, l):
 
 
 @njit(cache=True, error_model="numpy")
+def _millimetres(x):
+    """``x`` [m] rounded to whole millimetres: where the chain lengths are kept."""
+    return int(np.round(x * 1000.0))
+
+
+@njit(cache=True, error_model="numpy")
 def _chain_reach(k, depth, relaxed, memo, k0, rules, relaxed_rules, tx, ty, features, faces, l):
     """:meth:`FootholdChains.reach` from the stance foot at ``(k0 + k)`` mm, memoised in
     ``memo[k, depth, relaxed]`` (positions outside ``memo`` are not kept)."""
@@ -546,7 +551,7 @@ def _chain_reach(k, depth, relaxed, memo, k0, rules, relaxed_rules, tx, ty, feat
     for p in range(2):
         step = _CHAIN_STRIDE if p == 0 else 1
         for i in range(0, cx.size, step):
-            kc = int(np.round(cx[i] * 1000.0)) - k0
+            kc = _millimetres(cx[i]) - k0
             r = _chain_reach(
                 kc, depth - 1, relaxed, memo, k0, rules, relaxed_rules, tx, ty, features, faces, l
             )
@@ -564,15 +569,12 @@ def _chain_reach(k, depth, relaxed, memo, k0, rules, relaxed_rules, tx, ty, feat
 def _landing_rank(x, depth, memo, k0, rules, relaxed_rules, tx, ty, features, faces, l):
     """:meth:`FootholdChains.landing_rank` of a foothold at ``x`` [m] (the rules' chains)."""
     args = (memo, k0, rules, relaxed_rules, tx, ty, features, faces, l)
-    if _chain_reach(int(np.round(x * 1000.0)) - k0, depth, 0, *args) < depth:
-        return _SLACK.size + 1
+    if _chain_reach(_millimetres(x) - k0, depth, 0, *args) < depth:
+        return _LANDING_SLACK.size + 1
     r = 0
-    for s in _SLACK:  # largest landing error the chain tolerates, first
-        lo = _chain_reach(int(np.round((x - s) * 1000.0)) - k0, depth, 0, *args)
-        if (
-            lo >= depth
-            and _chain_reach(int(np.round((x + s) * 1000.0)) - k0, depth, 0, *args) >= depth
-        ):
+    for s in _LANDING_SLACK:  # largest landing error the chain tolerates, first
+        lo = _chain_reach(_millimetres(x - s) - k0, depth, 0, *args)
+        if lo >= depth and _chain_reach(_millimetres(x + s) - k0, depth, 0, *args) >= depth:
             break
         r += 1
     return r
