@@ -27,7 +27,14 @@ from envs.physics import model
 
 from .reduced import output_acceleration
 
-__all__ = ["constraint_at", "feedback_law", "friction_clip", "pack_scalars", "thetadot_sq_at"]
+__all__ = [
+    "constraint_at",
+    "feedback_law",
+    "friction_clip",
+    "lyapunov_at",
+    "pack_scalars",
+    "thetadot_sq_at",
+]
 
 _jit = njit(cache=True, error_model="numpy")
 
@@ -206,3 +213,19 @@ def friction_clip(P, q1, q2, q1d, q2d, u, mu, nx, ny, umax):
     if lo > hi:
         return u
     return min(max(u, lo), hi)
+
+
+@_jit
+def lyapunov_at(Zinv, theta0, step, z0, z1, z2, theta):
+    """``V = z' Z^-1(theta) z`` for ``z = (z0, z1, z2)``, with ``Z^-1`` given at the uniform
+    phase nodes ``theta0 + k step`` [rad] (``Zinv``, shape ``(n + 1, 3, 3)``) and interpolated
+    linearly between them (held at the ends)."""
+    r = min(max((theta - theta0) / step, 0.0), Zinv.shape[0] - 1 - 1e-12)
+    k = int(r)
+    w = r - k
+    z = (z0, z1, z2)
+    V = 0.0
+    for i in range(3):
+        for j in range(3):
+            V += z[i] * ((1 - w) * Zinv[k, i, j] + w * Zinv[k + 1, i, j]) * z[j]
+    return V

@@ -24,7 +24,7 @@ import numpy as np
 
 from envs.physics.terrain import Terrain
 
-from .feedback import pack_scalars
+from .feedback import lyapunov_at, pack_scalars
 from .numerics import one_blas_thread
 from .riccati import solve_jump_riccati
 from .transverse import StepModel, impact_jacobian
@@ -59,11 +59,9 @@ class HorizonSolution:
     def lyapunov(self, z: np.ndarray, theta: float) -> float:
         """``V = z' Z^-1 z`` at phase ``theta`` (linear interpolation of ``Z^-1``)."""
         th = self.theta
-        r = min(max((theta - th[0]) / (th[1] - th[0]), 0.0), th.size - 1 - 1e-12)
-        k = int(r)
-        w = r - k
-        Zm = (1 - w) * self.Zinv[k] + w * self.Zinv[k + 1]
-        return float(z @ Zm @ z)
+        return lyapunov_at(
+            self.Zinv, th[0], th[1] - th[0], float(z[0]), float(z[1]), float(z[2]), float(theta)
+        )
 
 
 @dataclass(frozen=True)

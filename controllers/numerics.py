@@ -11,6 +11,7 @@ problems are small: a second thread would not speed them up).
 from __future__ import annotations
 
 import functools
+import threading
 from collections.abc import Callable
 from typing import Any, TypeVar
 
@@ -21,18 +22,30 @@ __all__ = ["one_blas_thread"]
 F = TypeVar("F", bound=Callable[..., Any])
 
 _controller: ThreadpoolController | None = None
+_depth = threading.local()  # per thread: calls under way inside the limit
 
 
 def one_blas_thread(func: F) -> F:
     """Decorator: run ``func`` with the BLAS libraries of the process on one thread (restored
-    afterwards; calls may nest)."""
+    afterwards; calls may nest, and a nested call runs inside its caller's limit)."""
 
     @functools.wraps(func)
     def wrapper(*args: Any, **kwargs: Any) -> Any:
         global _controller
+        depth = getattr(_depth, "n", 0)
+        if depth:
+            _depth.n = depth + 1
+            try:
+                return func(*args, **kwargs)
+            finally:
+                _depth.n = depth
         if _controller is None:  # found once: the BLAS libraries numpy and scipy loaded
             _controller = ThreadpoolController()
         with _controller.limit(limits=1, user_api="blas"):
-            return func(*args, **kwargs)
+            _depth.n = 1
+            try:
+                return func(*args, **kwargs)
+            finally:
+                _depth.n = 0
 
     return wrapper  # type: ignore[return-value]

@@ -195,8 +195,22 @@ class ChebyshevSeries:
 
 def _series_at(x: np.ndarray, coef: np.ndarray) -> np.ndarray | float:
     """The Chebyshev series ``coef`` at ``x`` (a float where ``x`` is a scalar)."""
-    out = _clenshaw(np.ravel(x), np.ascontiguousarray(coef, dtype=np.float64))
+    c = np.ascontiguousarray(coef, dtype=np.float64)
+    if isinstance(x, float) and c.ndim == 1:
+        return _clenshaw_at(x, c)
+    out = _clenshaw(np.ravel(x), c)
     return float(out[0]) if np.ndim(x) == 0 else out.reshape(np.shape(x))
+
+
+@_jit
+def _clenshaw_at(x, c):
+    """:func:`_clenshaw` at one point ``x``: the same numbers."""
+    n = c.size
+    x2 = 2.0 * x
+    c0, c1 = c[n - 2], c[n - 1]
+    for i in range(3, n + 1):
+        c0, c1 = c[n - i] - c1, c0 + c1 * x2
+    return c0 + c1 * x
 
 
 @_jit

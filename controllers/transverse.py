@@ -18,10 +18,12 @@ through :mod:`envs.physics.model` (exact to rounding), so the model equations ar
 
 from __future__ import annotations
 
+import functools
 import math
 from dataclasses import dataclass, field
 
 import numpy as np
+from numba import njit
 from numpy.polynomial import polynomial as npoly
 from scipy.optimize import brentq
 
@@ -44,6 +46,36 @@ __all__ = [
 ]
 
 _H = 1e-30  # complex-step size
+
+
+@functools.cache
+def _power_fit(order: int) -> tuple[np.ndarray, np.ndarray, np.ndarray, float]:
+    """The fit of a polynomial of ``order`` through its values at ``order + 1`` Chebyshev
+    points ``sn`` of [0, 1], as :func:`numpy.polynomial.polynomial.polyfit` sets it up:
+    ``(sn, design matrix with unit columns, the columns' norms, rcond)``; read-only."""
+    sn = 0.5 * (1 - np.cos(np.pi * np.arange(order + 1) / order))
+    lhs = npoly.polyvander(sn, order).T
+    scale = np.sqrt(np.square(lhs).sum(1))
+    scale[scale == 0] = 1
+    design = lhs.T / scale
+    for a in (sn, design, scale):
+        a.flags.writeable = False
+    return sn, design, scale, len(sn) * np.finfo(np.float64).eps
+
+
+@njit(cache=True, error_model="numpy")
+def _power_series3(s, c0, c1, c2):
+    """``numpy.polynomial.polynomial.polyval(s, c)`` of the three coefficient vectors at the
+    points ``s`` (1-d), by its Horner recurrence in its order: the same numbers."""
+    out = np.empty((3, s.size))
+    for r, c in enumerate((c0, c1, c2)):
+        n = c.size
+        for j in range(s.size):
+            v = c[n - 1] + s[j] * 0.0
+            for i in range(2, n + 1):
+                v = c[n - i] + v * s[j]
+            out[r, j] = v
+    return out
 
 
 @dataclass
@@ -79,8 +111,9 @@ class StepModel:
         if not (math.isfinite(self.thetadot_plus) and self.thetadot_plus > 0):
             raise ValueError(f"StepModel.thetadot_plus = {self.thetadot_plus!r}; allowed > 0")
         # power-basis coefficients of phi in s (exact: phi is a polynomial of this order)
-        sn = 0.5 * (1 - np.cos(np.pi * np.arange(c.order + 1) / c.order))
-        pc = npoly.polyfit(sn, c.phi(c.theta_plus + sn * c.span), c.order)
+        sn, design, scale, rcond = _power_fit(c.order)
+        # numpy.polynomial.polynomial.polyfit(sn, phi, order), its design matrix made once
+        pc = np.linalg.lstsq(design, c.phi(c.theta_plus + sn * c.span), rcond)[0] / scale
         self._pc = (pc, npoly.polyder(pc) / c.span, npoly.polyder(pc, 2) / c.span**2)
         # the constraint continued past the step's ends may be singular or stall the walker
         # there (a steep polynomial): the margin then halves until neither happens
@@ -120,8 +153,11 @@ class StepModel:
     # ------------------------------------------------------------------ nominal motion
     def derivatives(self, theta: np.ndarray | float) -> tuple[np.ndarray, ...]:
         """``(phi, phi', phi'')`` at ``theta`` (the constraint in power form, fast)."""
-        s = self.constraint.s(theta)
-        return tuple(npoly.polyval(s, k) for k in self._pc)
+        s = np.asarray(self.constraint.s(theta), dtype=np.float64)
+        out = _power_series3(s.reshape(-1), *self._pc)
+        if s.ndim == 0:
+            return out[0, 0], out[1, 0], out[2, 0]
+        return out[0].reshape(s.shape), out[1].reshape(s.shape), out[2].reshape(s.shape)
 
     def _at(self, theta: float) -> tuple[float, float, float, float]:
         phi, dphi, ddphi = self.derivatives(theta)

@@ -68,6 +68,7 @@ class GaitPlanner:
             config.rules(), self.params.l, config.candidate_spacing, config.relaxed_rules()
         )
         self._gait_source: GaitPlanner = self  # the planner whose periodic gait steps pull to
+        self._gait_key: tuple | None = None  # the robot and settings in the gait cache's key
 
     def relaxed(self, **changes: Any) -> GaitPlanner:
         """A planner with the settings ``changes`` (fields of :class:`PlannerConfig`, e.g. a
@@ -104,7 +105,9 @@ class GaitPlanner:
             raise ValueError(f"step_length = {L!r}; allowed: (0, 2 l) = (0, {2 * self.params.l})")
         if not (math.isfinite(vt) and vt > 0):
             raise ValueError(f"speed = {vt!r}; allowed: > 0 m/s")
-        key = (tuple(self.P), tuple(sorted(asdict(cfg).items())), L, vt)
+        if self._gait_key is None:  # the robot and settings are fixed after construction
+            self._gait_key = (tuple(self.P), tuple(sorted(asdict(cfg).items())))
+        key = (*self._gait_key, L, vt)
         gait = self.gait_cache.get(key)
         if gait is None:
             gait = solve_periodic_gait(self.params, cfg, self._flat, L, vt)

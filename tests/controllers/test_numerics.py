@@ -8,6 +8,7 @@ import pytest
 from threadpoolctl import threadpool_info, threadpool_limits
 
 import envs  # noqa: F401  (registers the ids)
+from controllers.numerics import one_blas_thread
 from controllers.planner.gait_planner import GaitPlanner
 from controllers.planner.periodic import GaitCache
 from controllers.reference import ReferencePolicy
@@ -49,3 +50,38 @@ def test_episode_is_the_same_with_one_or_two_blas_threads(monkeypatch):
     one, two = _actions(1), _actions(2)
     assert one.size == two.size == 600
     np.testing.assert_array_equal(one, two)
+
+
+def _blas_threads() -> list[int]:
+    return [i["num_threads"] for i in threadpool_info() if i["user_api"] == "blas"]
+
+
+@pytest.mark.skipif(
+    not any(i["user_api"] == "blas" for i in threadpool_info()), reason="no BLAS thread pool"
+)
+def test_nested_calls_run_inside_the_outer_limit_which_is_then_restored():
+    """A decorated function called from another runs on one BLAS thread too, and leaving the
+    outer call restores the process's setting (also when the inner call raises)."""
+    seen = []
+
+    @one_blas_thread
+    def inner(fail: bool) -> None:
+        seen.append(_blas_threads())
+        if fail:
+            raise RuntimeError("inner")
+
+    @one_blas_thread
+    def outer() -> None:
+        seen.append(_blas_threads())
+        inner(False)
+        with pytest.raises(RuntimeError):
+            inner(True)
+        seen.append(_blas_threads())
+
+    with threadpool_limits(limits=2, user_api="blas"):
+        before = _blas_threads()
+        outer()
+        after = _blas_threads()
+        inner(False)  # alone: its own limit
+    assert before == after and set(before) == {2}
+    assert all(set(s) == {1} for s in seen) and len(seen) == 5

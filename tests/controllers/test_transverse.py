@@ -178,3 +178,27 @@ def test_theta_dot_squared_stays_positive_between_the_chebyshev_nodes():
     ref = StepModel(P, c, 0.39185373744840823, margin=0.0)
     # the constraint bends sharply: 48 Chebyshev nodes resolve the profile to 0.01 rad^2/s^2
     np.testing.assert_allclose(m.thetadot_sq(on), ref.thetadot_sq(on), atol=0.01)
+
+
+def test_power_form_is_numpys_polyfit_and_polyval_bit_for_bit():
+    """The constraint's power form is what ``numpy.polynomial.polynomial.polyfit`` gives
+    through its values at the Chebyshev points, and ``(phi, phi', phi'')`` what ``polyval``
+    gives, to the last bit, at a scalar and at arrays of any shape."""
+    from numpy.polynomial import polynomial as npoly
+
+    P = RobotParams.from_preset("paper").vector()
+    rng = np.random.default_rng(5)
+    for order in (4, 5, 6):
+        a = -0.2 + 0.05 * rng.standard_normal(order + 1)
+        c = BezierConstraint(a, -0.25, 0.2)
+        step = StepModel(P, c, 1.1)
+        sn = 0.5 * (1 - np.cos(np.pi * np.arange(order + 1) / order))
+        pc = npoly.polyfit(sn, c.phi(c.theta_plus + sn * c.span), order)
+        assert step.power_coefficients.tobytes() == pc.tobytes()
+        ders = (pc, npoly.polyder(pc) / c.span, npoly.polyder(pc, 2) / c.span**2)
+        for theta in (0.01, rng.uniform(-0.3, 0.25, 9), rng.uniform(-0.25, 0.2, (2, 3))):
+            s = c.s(theta)
+            for got, coef in zip(step.derivatives(theta), ders):
+                want = npoly.polyval(s, coef)
+                assert np.shape(got) == np.shape(want)
+                assert np.asarray(got).tobytes() == np.asarray(want).tobytes()
