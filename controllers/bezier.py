@@ -33,6 +33,18 @@ def _binomials(order: int) -> np.ndarray:
     return comb(order, np.arange(order + 1), exact=False)
 
 
+@lru_cache(maxsize=64)
+def _derivative_weights(order: int, deriv: int) -> tuple[float, ...]:
+    """The weights of the order-``(order - deriv)`` basis in the ``deriv``-th derivative's:
+    ``M!/(M-r)! (-1)^(r-i) C(r, i)``, ``i = 0 .. r``."""
+    scale = 1.0
+    for i in range(deriv):
+        scale *= order - i
+    return tuple(
+        scale * (-1.0) ** (deriv - i) * comb(deriv, i, exact=False) for i in range(deriv + 1)
+    )
+
+
 def bernstein_basis(order: int, s: np.ndarray | float, deriv: int = 0) -> np.ndarray:
     """Bernstein basis (or its ``deriv``-th derivative in ``s``) as a matrix.
 
@@ -48,24 +60,30 @@ def bernstein_basis(order: int, s: np.ndarray | float, deriv: int = 0) -> np.nda
         raise ValueError(f"Bezier order = {order!r}; allowed: integer >= 0")
     if int(deriv) != deriv or deriv < 0:
         raise ValueError(f"Bezier derivative order = {deriv!r}; allowed: integer >= 0")
-    order, deriv = int(order), int(deriv)
+    return _bases(int(order), s, (int(deriv),))[0]
+
+
+def _bases(order: int, s: np.ndarray | float, derivs: tuple[int, ...]) -> list[np.ndarray]:
+    """:func:`bernstein_basis` for each of ``derivs``, the powers of ``s`` and ``1 - s``
+    taken once for all of them."""
     s = np.asarray(s, dtype=np.float64)
-    out = np.zeros(s.shape + (order + 1,))
-    if deriv > order:
-        return out
-    m = order - deriv
-    k = np.arange(m + 1)
     sb = s[..., None]
-    low = _binomials(m) * sb**k * (1.0 - sb) ** (m - k)  # basis of order m
-    # d^r/ds^r b(s) = M!/(M-r)! sum_k (Delta^r a)_k B_{k,M-r}(s); Delta^r a_k = sum_i (-1)^(r-i)
-    # C(r, i) a_{k+i}, so the basis of b^(r) w.r.t. a_j collects the terms with k + i = j.
-    scale = 1.0
-    for i in range(deriv):
-        scale *= order - i
-    for i in range(deriv + 1):
-        w = scale * (-1.0) ** (deriv - i) * comb(deriv, i, exact=False)
-        out[..., i : i + m + 1] += w * low
-    return out
+    k = np.arange(order + 1)
+    up, down = sb**k, (1.0 - sb) ** k
+    bases = []
+    for deriv in derivs:
+        out = np.zeros(s.shape + (order + 1,))
+        if deriv <= order:
+            m = order - deriv
+            # basis of order m: C(m, k) s^k (1 - s)^(m - k)
+            low = _binomials(m) * up[..., : m + 1] * down[..., m::-1]
+            # d^r/ds^r b(s) = M!/(M-r)! sum_k (Delta^r a)_k B_{k,M-r}(s); Delta^r a_k =
+            # sum_i (-1)^(r-i) C(r, i) a_{k+i}, so the basis of b^(r) w.r.t. a_j collects the
+            # terms with k + i = j.
+            for i, w in enumerate(_derivative_weights(order, deriv)):
+                out[..., i : i + m + 1] += w * low
+        bases.append(out)
+    return bases
 
 
 @njit(cache=True, error_model="numpy")
@@ -206,7 +224,7 @@ class BezierConstraint:
     def derivatives(self, theta: np.ndarray | float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """``(phi, phi', phi'')`` at ``theta`` in one pass."""
         s = self.s(theta)
-        b = [_on_basis(self.coeffs, bernstein_basis(self.order, s, d)) for d in range(3)]
+        b = [_on_basis(self.coeffs, basis) for basis in _bases(self.order, s, (0, 1, 2))]
         return b[0], b[1] / self.span, b[2] / self.span**2
 
     second_coeff = staticmethod(second_coeff)

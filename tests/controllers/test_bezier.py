@@ -90,3 +90,18 @@ def test_chord_coefficients_run_straight_from_the_first_to_the_last():
     # a Bezier polynomial on its chord is a straight line in s
     s = np.linspace(0.0, 1.0, 7)
     np.testing.assert_allclose(bezier(line, s), -0.4 + 0.9 * s, atol=1e-15)
+
+
+def test_derivatives_in_one_pass_are_phi_and_its_derivatives_bit_for_bit():
+    """``derivatives`` takes the powers of ``s`` and ``1 - s`` once for the three bases: the
+    same numbers as ``phi``, ``dphi`` and ``ddphi`` evaluated one by one, at a scalar and at
+    arrays, for every order."""
+    rng = np.random.default_rng(7)
+    for order in range(1, 8):
+        c = BezierConstraint(rng.normal(size=order + 1), -0.2, 0.25)
+        for theta in (0.03, rng.uniform(-0.3, 0.35, 17), rng.uniform(-0.2, 0.25, (2, 5))):
+            for got, want in zip(
+                c.derivatives(theta), (c.phi(theta), c.dphi(theta), c.ddphi(theta))
+            ):
+                assert np.shape(got) == np.shape(want)
+                assert np.asarray(got).tobytes() == np.asarray(want).tobytes()
