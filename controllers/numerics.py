@@ -10,6 +10,7 @@ problems are small: a second thread would not speed them up).
 
 from __future__ import annotations
 
+import contextlib
 import functools
 import threading
 from collections.abc import Callable
@@ -33,19 +34,17 @@ def one_blas_thread(func: F) -> F:
     def wrapper(*args: Any, **kwargs: Any) -> Any:
         global _controller
         depth = getattr(_depth, "n", 0)
-        if depth:
+        if depth:  # inside a caller's limit already
+            limit = contextlib.nullcontext()
+        else:
+            if _controller is None:  # found once: the BLAS libraries numpy and scipy loaded
+                _controller = ThreadpoolController()
+            limit = _controller.limit(limits=1, user_api="blas")
+        with limit:
             _depth.n = depth + 1
             try:
                 return func(*args, **kwargs)
             finally:
                 _depth.n = depth
-        if _controller is None:  # found once: the BLAS libraries numpy and scipy loaded
-            _controller = ThreadpoolController()
-        with _controller.limit(limits=1, user_api="blas"):
-            _depth.n = 1
-            try:
-                return func(*args, **kwargs)
-            finally:
-                _depth.n = 0
 
     return wrapper  # type: ignore[return-value]

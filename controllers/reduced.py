@@ -204,7 +204,8 @@ def _series_at(x: np.ndarray, coef: np.ndarray) -> np.ndarray | float:
 
 @_jit
 def _clenshaw_at(x, c):
-    """:func:`_clenshaw` at one point ``x``: the same numbers."""
+    """The Chebyshev series ``c`` (at least two coefficients) at one point ``x``, by
+    ``chebval``'s recurrence in its order."""
     n = c.size
     x2 = 2.0 * x
     c0, c1 = c[n - 2], c[n - 1]
@@ -216,16 +217,11 @@ def _clenshaw_at(x, c):
 @_jit
 def _clenshaw(x, c):
     """``numpy.polynomial.chebyshev.chebval(x, c)`` for 1-d ``x`` and ``c`` (at least two
-    coefficients), by its recurrence in its order: the same numbers, without its per-term
-    array operations."""
-    n = c.size
+    coefficients), by its recurrence in its order (:func:`_clenshaw_at` at each point): the
+    same numbers, without its per-term array operations."""
     out = np.empty(x.size)
     for j in range(x.size):
-        x2 = 2.0 * x[j]
-        c0, c1 = c[n - 2], c[n - 1]
-        for i in range(3, n + 1):
-            c0, c1 = c[n - i] - c1, c0 + c1 * x2
-        out[j] = c0 + c1 * x[j]
+        out[j] = _clenshaw_at(x[j], c)
     return out
 
 
