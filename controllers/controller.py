@@ -181,11 +181,19 @@ class ControllerConfig:
         replan_evaluations: step evaluations (see :attr:`PlannerConfig.max_evaluations`) the
             planner calls of one replanning may spend together, the full problem and the
             relaxations (the beam search over the horizon, which has its own budget per call,
-            :attr:`PlannerConfig.beam_evaluations`, not counted); each call gets what is left
+            :attr:`PlannerConfig.beam_evaluations`, not counted: see
+            ``replan_beam_evaluations``); each call gets what is left
             (at most the planner's own ``max_evaluations``), the least-violating steps get the
             planner's own budget. A deterministic bound on the replanning time (about 55 us per
             evaluation on one core), >= 1. The plan at :meth:`TransverseController.reset`
             (nothing to fall back on) runs its whole search.
+        replan_beam_evaluations: step evaluations the beam searches of one replanning may spend
+            together, >= 0: each planner call's beam search gets what is left (at most
+            :attr:`PlannerConfig.beam_evaluations`), so a replanning spends at most
+            ``replan_evaluations`` plus this (plus a batch a beam pass) with the least-violating
+            steps' own budget. 0 (default): each call's beam search has the planner's whole
+            budget (a footstep whose full problem and deeper relaxation both run one spends
+            it twice).
         tube_energy: replan within a step (replan mode) when the estimated state leaves the
             plan's tube: ``|theta_dot^2 - theta_dot*^2(theta)|`` above this fraction of
             ``theta_dot*^2(theta)`` (a push, a stall in the making, a plan made from a poor
@@ -231,6 +239,7 @@ class ControllerConfig:
     late_blend: float = 0.05
     fallbacks: tuple = DEFAULT_FALLBACKS
     replan_evaluations: int = 4000
+    replan_beam_evaluations: int = 0
     tube_energy: float = 0.25
     tube_y: float = 0.0
     tube_ticks: int = 4
@@ -253,6 +262,7 @@ class ControllerConfig:
             "grid": 4,
             "plan_steps": 2,
             "replan_evaluations": 1,
+            "replan_beam_evaluations": 0,
             "tube_ticks": 1,
             "tube_replans": 0,
         }
@@ -449,6 +459,7 @@ class TransverseController:
         self._hold: tuple[np.ndarray, ...] | None = None  # the posture hold's, without gains
         self._torque_gain = float(model.input_gain(self.P))  # hip torque per input unit [N m]
         self._plan_offset = 0
+        self._beam_left: int | None = None  # a replanning's beam budget left (None: no cap)
         self._relaxed: dict[tuple, GaitPlanner] = {}  # relaxed planners, by relaxation
         for level in (*self.config.fallbacks, *self.config.tube_fallbacks):
             # a relaxation out of range fails here
@@ -675,6 +686,7 @@ class TransverseController:
         single: list[StepPlan] = []  # the first lone step found (held with PD if nothing else)
         notes: list[str] = []
         left = self.config.replan_evaluations
+        self._beam_left = self.config.replan_beam_evaluations or None  # None: no shared cap
         cap = self.planner.config.max_evaluations
         floored = self.planner.config.dip_floor > 0
         if floored and levels and levels[0] is None:
@@ -803,19 +815,32 @@ class TransverseController:
         budget: int,
     ) -> Plan:
         """``planner``'s plan of ``n`` steps from ``(q, qd)`` within ``budget`` step
-        evaluations (its whole search at reset, with no previous plan to fall back on).
+        evaluations and, where :attr:`ControllerConfig.replan_beam_evaluations` caps them,
+        what the replanning's beam searches have left (its whole search at reset, with no
+        previous plan to fall back on).
 
         Raises:
             PlanningError: as :meth:`GaitPlanner.plan`.
         """
-        return planner.plan(
-            self.terrain,
-            (q, qd),
-            self._stance,
-            horizon=n,
-            previous_plan=previous,
-            max_evaluations=None if previous is None else budget,
-        )
+        replanning = previous is not None
+        beam = self._beam_left if replanning else None
+        try:
+            plan = planner.plan(
+                self.terrain,
+                (q, qd),
+                self._stance,
+                horizon=n,
+                previous_plan=previous,
+                max_evaluations=budget if replanning else None,
+                max_beam_evaluations=beam,
+            )
+        except PlanningError as exc:
+            if beam is not None:
+                self._beam_left = max(beam - exc.beam_evaluations, 0)
+            raise
+        if beam is not None:
+            self._beam_left = max(beam - plan.beam_evaluations, 0)
+        return plan
 
     def _previous_steps(self, first: bool, new_step: bool) -> tuple[list[StepPlan], int]:
         """What is left of the previous plan for the current step, and its offset."""

@@ -80,18 +80,19 @@ def beam_steps(
 
     Returns ``(steps, evaluations, exhausted)``: the cheapest branch that spans the horizon,
     else the deepest branch found (possibly empty; the full pass's where the two reach as
-    deep), as :class:`StepPlan` s; the step evaluations spent (at most
-    ``PlannerConfig.beam_evaluations`` plus one batch a pass; the call's ``time_budget`` bounds
-    it too); and whether the budget cut the search.
+    deep), as :class:`StepPlan` s; the step evaluations spent (at most the search's
+    ``beam_budget``, ``PlannerConfig.beam_evaluations`` unless the planning call set less,
+    plus one batch a pass; the call's ``time_budget`` bounds it too); and whether the budget
+    cut the search.
     """
-    cfg = search.config
+    cfg, budget = search.config, search.beam_budget
     used = 0
     coarse: list[StepPlan] = []
     if cfg.beam_coarse > 0:
-        coarse, used, cut = _beam_pass(search, start, stance, cfg.beam_coarse, cfg.beam_evaluations)
+        coarse, used, cut = _beam_pass(search, start, stance, cfg.beam_coarse, budget)
         if len(coarse) == search.horizon or cut:
             return coarse, used, cut
-    steps, more, cut = _beam_pass(search, start, stance, BEAM_SHAPES, cfg.beam_evaluations - used)
+    steps, more, cut = _beam_pass(search, start, stance, BEAM_SHAPES, budget - used)
     return (steps if len(steps) >= len(coarse) else coarse), used + more, cut
 
 

@@ -41,8 +41,9 @@ class PlanningError(RuntimeError):
     feasible steps ``0 .. step - 1`` before the failure (a list of :class:`StepPlan`, the best
     plan found), ``evaluations`` (step evaluations spent, the beam search's included),
     ``beam_evaluations`` (those of the beam search over the horizon, which has its own budget,
-    ``PlannerConfig.beam_evaluations``) and ``budget_exhausted`` (the search was cut by its
-    budget, ``PlannerConfig.max_evaluations`` / ``time_budget``).
+    ``PlannerConfig.beam_evaluations`` or less where the call set less) and
+    ``budget_exhausted`` (the search was cut by its budget, ``PlannerConfig.max_evaluations`` /
+    ``time_budget``).
     """
 
     def __init__(self, step: int, constraint: str, detail: str = ""):
@@ -163,7 +164,8 @@ class PlannerConfig:
         beam_speeds: shapes a beam step keeps per foothold besides the cheapest, spread over
             the post-impact speeds they lead to (slowest to fastest).
         beam_evaluations: step evaluations one beam search may spend (besides the
-            depth-first search's ``max_evaluations``; a deterministic bound).
+            depth-first search's ``max_evaluations``; a deterministic bound; a planning call
+            may give it less, :meth:`GaitPlanner.plan`'s ``max_beam_evaluations``).
         beam_coarse: where > 0, the beam search first runs with this many of each of its two
             sets of :data:`BEAM_SHAPES` quasi-random shapes per foothold (the first points of
             each Sobol set) and runs with all of them only where that spans no horizon, with

@@ -123,6 +123,7 @@ class GaitPlanner:
         horizon: int | None = None,
         previous_plan: Plan | None = None,
         max_evaluations: int | None = None,
+        max_beam_evaluations: int | None = None,
     ) -> Plan:
         """Plan ``horizon`` steps from the post-impact ``state``.
 
@@ -140,17 +141,21 @@ class GaitPlanner:
             max_evaluations: step evaluations this call may spend, an integer >= 1 (default:
                 ``config.max_evaluations`` when replanning, i.e. with a ``previous_plan``; a
                 plan from scratch runs its whole search).
+            max_beam_evaluations: step evaluations the beam search over the horizon may spend
+                in this call, an integer >= 0 (0: no beam search; default and at most:
+                ``config.beam_evaluations``).
 
         Raises:
             PlanningError: no feasible step (names the step and the violated constraint; its
                 ``partial`` holds the feasible steps found before it).
             ValueError: a malformed or non-finite state or stance foot, a horizon that is not
-                an integer >= 1.
+                an integer >= 1, a budget out of its range.
         """
         t0 = time.perf_counter()
         search, start, stance = self._search(
-            terrain, state, stance_foot, horizon, previous_plan, max_evaluations
-        )
+            terrain, state, stance_foot, horizon, previous_plan, max_evaluations,
+            max_beam_evaluations,
+        )  # fmt: skip
         plan = Plan(search.run(start, stance), self.params, self.config)
         plan.evaluations = search.evaluations.used
         plan.beam_evaluations = search.beam_evaluations
@@ -199,12 +204,23 @@ class GaitPlanner:
         plan.solve_time = time.perf_counter() - t0
         return plan
 
-    def _search(self, terrain, state, stance_foot, horizon, previous_plan, max_evaluations):
+    def _search(
+        self,
+        terrain,
+        state,
+        stance_foot,
+        horizon,
+        previous_plan,
+        max_evaluations,
+        max_beam_evaluations=None,
+    ):
         """The checked arguments of a planning call as ``(StepSearch, start, stance)``."""
         cfg = self.config
-        budget = None
+        budget = beam_budget = None
         if max_evaluations is not None:
             budget = integer_setting("max_evaluations", max_evaluations, 1)
+        if max_beam_evaluations is not None:
+            beam_budget = integer_setting("max_beam_evaluations", max_beam_evaluations, 0)
         H = cfg.horizon if horizon is None else integer_setting("horizon", horizon, 1)
         try:
             q = np.asarray(state[0], dtype=float).reshape(-1)
@@ -222,7 +238,16 @@ class GaitPlanner:
             self._solutions.clear()
         gait = self.periodic_gait()
         search = StepSearch(
-            self.params, cfg, tmap, gait, self._solutions, self._chains, H, previous_plan, budget
+            self.params,
+            cfg,
+            tmap,
+            gait,
+            self._solutions,
+            self._chains,
+            H,
+            previous_plan,
+            budget,
+            beam_budget,
         )
         start = (float(q[1]), float(q[0]), float(qd[0] / qd[1]), float(qd[1]))
         return search, start, stance

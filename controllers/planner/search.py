@@ -109,6 +109,7 @@ class StepSearch:
         horizon: int,
         previous_plan: Plan | None,
         max_evaluations: int | None = None,
+        max_beam_evaluations: int | None = None,
     ):
         self.params, self.config, self.tmap = params, config, tmap
         self.P = params.vector()
@@ -140,6 +141,10 @@ class StepSearch:
         self.struggling = False
         self.beam = False  # the plan came from the beam search over the horizon
         self.beam_evaluations = 0  # step evaluations the beam search spent (its own budget)
+        # what the beam search may spend: its configured budget, or less where the call says
+        self.beam_budget = config.beam_evaluations
+        if max_beam_evaluations is not None:
+            self.beam_budget = min(self.beam_budget, max_beam_evaluations)
 
     def run(
         self, start: tuple[float, float, float, float], stance: tuple[float, float]
@@ -164,7 +169,7 @@ class StepSearch:
             exc.partial = list(self.partial)
             exc.evaluations = self.evaluations.used
             exc.budget_exhausted = self.evaluations.exhausted
-            if reach < H or self.config.beam_width == 0:
+            if reach < H or self.config.beam_width == 0 or self.beam_budget <= 0:
                 raise
             # the footholds and speeds over the horizon searched jointly
             steps, used, cut = beam_steps(self, start, stance)

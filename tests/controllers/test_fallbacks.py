@@ -5,8 +5,8 @@ import pytest
 
 from controllers import ControllerConfig, GaitPlanner, TransverseController
 from controllers.controller import FALLBACK_PD
-from controllers.fallbacks import DEFAULT_FALLBACKS
-from controllers.planner import touchdown_configuration
+from controllers.fallbacks import DEFAULT_FALLBACKS, fallback_name
+from controllers.planner import PlanningError, touchdown_configuration
 from controllers.reduced import pfl_terms
 from envs.physics.terrain import Terrain
 
@@ -289,3 +289,41 @@ def test_the_dip_floor_is_a_preference_of_the_full_problem(gait):
         np.testing.assert_array_equal(runs[0.95][key], plain[key])
     for r in runs[0.5]["records"]:
         assert r.fallback is None and r.degradations == ["full problem"]
+
+
+@pytest.mark.parametrize("cap,expected", [(40000, [40000, 25000, 10000, 0]), (0, [None] * 4)])
+def test_a_replanning_shares_its_beam_budget_across_its_planner_calls(
+    gait, monkeypatch, cap, expected
+):
+    """With ``replan_beam_evaluations`` the beam searches of one replanning share that budget:
+    each planner call's beam gets what the calls before it left (here every call's beam
+    spends 15,000 and fails). 0, the default: no cap passed, each call's beam has the
+    planner's own budget. The plan at reset (nothing to fall back on) is never capped."""
+    cfg = ControllerConfig(replan_beam_evaluations=cap)
+    ctrl = TransverseController("paper", "flat", cfg)
+    seen = []
+    real = GaitPlanner.plan
+
+    def spy(self, *args, **kwargs):
+        seen.append(kwargs.get("max_beam_evaluations"))
+        return real(self, *args, **kwargs)
+
+    monkeypatch.setattr(GaitPlanner, "plan", spy)
+    ctrl.reset(gait.q, gait.qd)
+    assert seen == [None]
+
+    def failing(self, *args, **kwargs):
+        seen.append(kwargs.get("max_beam_evaluations"))
+        exc = PlanningError(0, "hip input within the actuator limit")
+        exc.evaluations, exc.beam_evaluations = 15010, 15000
+        raise exc
+
+    monkeypatch.setattr(GaitPlanner, "plan", failing)
+    seen.clear()
+    ctrl.replan(gait.q, gait.qd)
+    rec = ctrl.records[-1]
+    assert rec.degradations[:4] == ["full problem", *(fallback_name(f) for f in cfg.fallbacks[:3])]
+    assert seen == expected
+    assert rec.fallback in ("previous plan", "least violation")
+    with pytest.raises(ValueError, match="replan_beam_evaluations"):
+        ControllerConfig(replan_beam_evaluations=-1)

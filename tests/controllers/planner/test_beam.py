@@ -165,3 +165,33 @@ def test_terrain_no_sequence_crosses_still_raises_naming_the_step(planners):
 def test_beam_settings_are_validated(bad):
     with pytest.raises(ValueError, match=next(iter(bad))):
         PlannerConfig(**bad)
+
+
+def test_a_call_may_give_the_beam_less_than_its_budget(rise_after_drops):
+    """``max_beam_evaluations`` caps the call's beam search below ``beam_evaluations`` (the
+    same plan as that budget set in the config), 0 runs none (the depth-first search's
+    failure is raised), and a value out of range is refused."""
+    course = rise_after_drops
+    pl = GaitPlanner("paper", FULL)
+
+    def plan(**kwargs):
+        return pl.plan(
+            course.terrain(), course.state, course.stance, horizon=HORIZON,
+            max_evaluations=BUDGET, **kwargs,
+        )  # fmt: skip
+
+    with pytest.raises(PlanningError) as capped:
+        plan(max_beam_evaluations=300)
+    with pytest.raises(PlanningError) as configured:
+        plan_blocks(course, **FULL, beam_evaluations=300)
+    assert 0 < capped.value.beam_evaluations <= 300 + 65
+    assert capped.value.beam_evaluations == configured.value.beam_evaluations
+    assert [s.foothold for s in capped.value.partial] == [
+        s.foothold for s in configured.value.partial
+    ]
+    with pytest.raises(PlanningError) as none:
+        plan(max_beam_evaluations=0)
+    assert none.value.beam_evaluations == 0 and none.value.evaluations <= BUDGET + 100
+    assert plan(max_beam_evaluations=10**9).beam  # at most the config's: the whole beam
+    with pytest.raises(ValueError, match="max_beam_evaluations"):
+        plan(max_beam_evaluations=-1)
