@@ -824,8 +824,9 @@ class TransverseController:
         """
         replanning = previous is not None
         beam = self._beam_left if replanning else None
+        outcome: Plan | PlanningError | None = None
         try:
-            plan = planner.plan(
+            outcome = planner.plan(
                 self.terrain,
                 (q, qd),
                 self._stance,
@@ -834,13 +835,13 @@ class TransverseController:
                 max_evaluations=budget if replanning else None,
                 max_beam_evaluations=beam,
             )
+            return outcome
         except PlanningError as exc:
-            if beam is not None:
-                self._beam_left = max(beam - exc.beam_evaluations, 0)
+            outcome = exc
             raise
-        if beam is not None:
-            self._beam_left = max(beam - plan.beam_evaluations, 0)
-        return plan
+        finally:
+            if beam is not None and outcome is not None:
+                self._beam_left = max(beam - outcome.beam_evaluations, 0)
 
     def _previous_steps(self, first: bool, new_step: bool) -> tuple[list[StepPlan], int]:
         """What is left of the previous plan for the current step, and its offset."""
