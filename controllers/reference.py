@@ -83,7 +83,7 @@ ADDED_SETTINGS: dict[str, Any] = {
         "beam_coarse": 0,
         "compiled_sqp": 0,
     },
-    "controller": {"posture_hold": False},
+    "controller": {"posture_hold": False, "replan_beam_evaluations": 0},
 }
 
 
