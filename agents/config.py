@@ -73,6 +73,19 @@ VALIDATION_SEEDS = 1000
 TEST_SEED = VALIDATION_SEEDS
 MAX_SEED = 2**32 - 1
 
+
+def seed_label(first: int, last: int) -> str:
+    """What the evaluation seeds ``first`` to ``last`` (absolute) are: ``"validation seeds
+    a-b"`` within the first :data:`VALIDATION_SEEDS` evaluation seeds (those tuned on),
+    ``"held-out seeds a-b"`` past them, ``"validation and held-out seeds a-b"`` across both."""
+    edge = EVAL_SEED_OFFSET + VALIDATION_SEEDS
+    if first >= edge:
+        kind = "held-out"
+    else:
+        kind = "validation" if last < edge else "validation and held-out"
+    return f"{kind} seeds {first}-{last}"
+
+
 # rl-zoo3 keys that are not keyword arguments of the algorithm
 ZOO_KEYS = frozenset(
     {

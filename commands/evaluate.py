@@ -39,7 +39,7 @@ from rich.console import Console
 from rich.markup import escape
 from rich.table import Table
 
-from agents.config import TEST_SEED
+from agents.config import TEST_SEED, seed_label
 from agents.evaluate import (
     CONTROLLED_BASELINES,
     PERCEPTION_MODES,
@@ -412,8 +412,8 @@ def run(args: argparse.Namespace) -> int:
         if trained and "cannot tell the algorithm" in message and "--algo" not in message:
             raise ValueError(f"{exc}; name it with --algo") from exc
         raise
-    seeds = f"{ev.episodes[0].seed}-{ev.episodes[-1].seed}"
-    print_table([ev], title=f"{ev.policy} on {ev.env_id}, held-out seeds {seeds}")
+    seeds = seed_label(ev.episodes[0].seed, ev.episodes[-1].seed)
+    print_table([ev], title=f"{ev.policy} on {ev.env_id}, {seeds}")
     line = certificate_line(ev)
     if line:
         print(line)

@@ -40,6 +40,7 @@ from rich.console import Console
 from rich.markup import escape
 from rich.table import Table
 
+from agents.config import seed_label
 from agents.sweep import load_spec, run_sweep
 from agents.sweep.aggregate import COLUMNS, cell_row, interval_text
 from commands.cli import (
@@ -107,7 +108,7 @@ def render_summary(summary: dict[str, Any], width: int = 100, terminal: bool = T
     seeds = summary.get("seeds")
     title = f"{summary.get('name', 'sweep')}: 95 % intervals"
     if seeds:
-        title += f", held-out seeds {seeds[0]}-{seeds[1]}"
+        title += f", {seed_label(seeds[0], seeds[1])}"
     rows = [cell_row(c) for c in summary["cells"]]
     lines: list[str] = []
     text = ""

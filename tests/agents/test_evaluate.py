@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 
 import envs  # noqa: F401
-from agents.config import EVAL_SEED_OFFSET, TEST_SEED, TRAIN_SEED_LIMIT
+from agents.config import EVAL_SEED_OFFSET, TEST_SEED, TRAIN_SEED_LIMIT, seed_label
 from agents.evaluate import (
     Evaluation,
     eval_seeds,
@@ -50,6 +50,14 @@ def test_seeds_are_held_out_and_validated():
         eval_seeds(-1, 3)
     with pytest.raises(ValueError, match="episodes = 0"):
         eval_seeds(0, 0)
+
+
+def test_reports_name_validation_and_held_out_seeds_apart():
+    """The first 1,000 evaluation seeds are the validation courses (tuned on): a report of them
+    never calls them held out."""
+    assert seed_label(*eval_seeds(0, 100)[::99]) == "validation seeds 1000000-1000099"
+    assert seed_label(*eval_seeds(TEST_SEED, 200)[::199]) == "held-out seeds 1001000-1001199"
+    assert seed_label(1_000_990, 1_001_009) == "validation and held-out seeds 1000990-1001009"
 
 
 def test_a_policy_that_always_walks():
