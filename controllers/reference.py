@@ -81,6 +81,7 @@ ADDED_SETTINGS: dict[str, Any] = {
         "dip_floor": 0.0,
         "drop_edge_margin": 0.0,
         "beam_coarse": 0,
+        "beam_full": 1,
         "compiled_sqp": 0,
     },
     "controller": {"posture_hold": False, "replan_beam_evaluations": 0},

@@ -14,7 +14,7 @@ cheapest by the cost accumulated over the branch, at most two per foothold. The 
 plan of feasible (not optimised) steps over the whole horizon, or the deepest branch found.
 With ``PlannerConfig.beam_coarse`` a coarse pass comes first, with the first few shapes of
 each set: its budget then reaches more branches, and where it spans the horizon the full set
-is not tried.
+is not tried (with ``PlannerConfig.beam_full`` 0, nowhere).
 
 Nothing here optimises: the steps are the sampled shapes themselves, every constraint of the
 step problem holds on them as for any planned step, and the next footstep's depth-first search
@@ -76,7 +76,8 @@ def beam_steps(
     """The beam search from ``start = (theta_plus, a_0, phi'(theta_plus), theta_dot_plus)``
     [rad, rad, -, rad/s] with the stance foot at ``stance`` [m], over ``search.horizon`` steps:
     with ``PlannerConfig.beam_coarse`` > 0, a coarse pass first (that many of each set of
-    shapes), then, where it spans no horizon, the full search with the evaluations left.
+    shapes), then, where it spans no horizon and ``PlannerConfig.beam_full`` is 1, the full
+    search with the evaluations left.
 
     Returns ``(steps, evaluations, exhausted)``: the cheapest branch that spans the horizon,
     else the deepest branch found (possibly empty; the full pass's where the two reach as
@@ -90,7 +91,7 @@ def beam_steps(
     coarse: list[StepPlan] = []
     if cfg.beam_coarse > 0:
         coarse, used, cut = _beam_pass(search, start, stance, cfg.beam_coarse, budget)
-        if len(coarse) == search.horizon or cut:
+        if len(coarse) == search.horizon or cut or not cfg.beam_full:
             return coarse, used, cut
     steps, more, cut = _beam_pass(search, start, stance, BEAM_SHAPES, budget - used)
     return (steps if len(steps) >= len(coarse) else coarse), used + more, cut

@@ -143,6 +143,25 @@ def test_where_the_coarse_pass_spans_no_horizon_the_full_beam_plans(rise_after_d
         assert full.beam_evaluations < plan.beam_evaluations <= budget + 2 * 65
 
 
+def test_with_beam_full_0_the_coarse_pass_is_the_whole_beam(rise_after_drops):
+    """``beam_full: 0``: where the coarse pass spans no horizon the call fails with that pass's
+    evaluations only (the full beam is not tried); where it spans, the plan is the same as
+    with the full pass allowed (it never ran)."""
+    two = plan_blocks(rise_after_drops, beam_width=32, beam_coarse=8)
+    with pytest.raises(PlanningError) as one:
+        plan_blocks(rise_after_drops, beam_width=32, beam_coarse=8, beam_full=0)
+    coarse_only = one.value.beam_evaluations
+    assert 0 < coarse_only < two.beam_evaluations
+    assert coarse_only <= PlannerConfig().beam_evaluations + 65
+    course = BlocksBeforeARise()
+    spans = plan_blocks(course, beam_full=0)
+    same = plan_blocks(course)
+    assert spans.beam and len(spans) == HORIZON
+    assert spans.beam_evaluations == same.beam_evaluations
+    for s, t in zip(spans, same):
+        assert np.array_equal(s.coeffs, t.coeffs) and s.foothold == t.foothold
+
+
 def test_terrain_no_sequence_crosses_still_raises_naming_the_step(planners):
     gait = planners["paper"].periodic_gait()
     pl = GaitPlanner("paper", {"beam_width": 8, "beam_evaluations": 5000})
@@ -160,6 +179,8 @@ def test_terrain_no_sequence_crosses_still_raises_naming_the_step(planners):
         {"beam_evaluations": 0},
         {"beam_coarse": -1},
         {"beam_coarse": 33},
+        {"beam_full": -1},
+        {"beam_full": 2},
     ],
 )
 def test_beam_settings_are_validated(bad):
