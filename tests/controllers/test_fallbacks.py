@@ -11,7 +11,8 @@ from controllers.reduced import pfl_terms
 from envs.physics.terrain import Terrain
 
 # a 7.5 mm rise the paper robot climbs with its hip input within 0.8 u_max but not within 0.3
-RISE = Terrain.stairs([0.33], [0.0075])
+RISE_X, RISE_HEIGHT = 0.33, 0.0075  # [m]
+RISE = Terrain.stairs([RISE_X], [RISE_HEIGHT])
 TIGHT = {"torque_fraction": 0.3}  # the nominal gait needs 0.24 u_max
 # budgets large enough not to cut these searches (the order of degradations, budgets aside)
 ROOMY = {"replan_evaluations": 10**5}
@@ -247,25 +248,28 @@ def test_the_beam_search_keeps_walking_where_the_depth_first_search_runs_into_a_
     ]
 
 
-@pytest.mark.parametrize("compiled_sqp,relaxations", [(0, 2), (1, 1)])
-def test_the_beam_search_does_not_spend_the_relaxations_budget(gait, compiled_sqp, relaxations):
+@pytest.mark.parametrize("compiled_sqp", [0, 1])
+def test_the_beam_search_does_not_spend_the_relaxations_budget(gait, compiled_sqp):
     """The beam search over the horizon has its own budget: where the full problem's
     depth-first search and beam fail, the relaxation gets the replanning budget the depth-first
     search left. Before, the beam's evaluations were charged to that budget too, and on this
     rise the relaxed search of the third footstep ran out of it ("search budget exhausted")
-    and left a shorter look-ahead. With SciPy's SLSQP two footsteps plan the relaxed problem;
-    with the compiled SQP one, the footstep before it keeping a shorter horizon of the full
-    problem."""
+    and left a shorter look-ahead. Here every relaxed footstep plans the relaxed problem, with
+    either solver. How many footsteps need the relaxation (one or two) turns on the last bits
+    of the floating point (the CPU's vector paths, the BLAS build), so it is not asserted."""
     relax = ControllerConfig(fallbacks=[{"torque_fraction": 0.8}])
-    out, _ = walk(RISE, gait, relax, {**TIGHT, "beam_width": 32, "compiled_sqp": compiled_sqp})
+    out, ctrl = walk(RISE, gait, relax, {**TIGHT, "beam_width": 32, "compiled_sqp": compiled_sqp})
     recs = out["records"]
     assert max(r.plan_evaluations for r in recs) > relax.replan_evaluations  # the beam ran
     relaxed = [r for r in recs if (r.fallback or "").startswith("relaxed")]
-    assert [r.fallback for r in relaxed] == ["relaxed: torque_fraction=0.8"] * relaxations
+    assert 1 <= len(relaxed) <= 2
+    assert {r.fallback for r in relaxed} == {"relaxed: torque_fraction=0.8"}
     for r in relaxed:
         assert r.reason.startswith("full problem: planning failed")
         assert "relaxed: torque_fraction=0.8: planning failed" not in r.reason, r.reason
-    assert out["failure"] is None and len(out["impacts"]) >= 5
+    # up the rise and walking on (the step after the climb is slow: 4 or 5 impacts in 4 s)
+    assert out["failure"] is None and len(out["impacts"]) >= 4
+    assert ctrl._stance[0] > RISE_X + 0.15 and ctrl._stance[1] == pytest.approx(RISE_HEIGHT)
 
 
 def test_the_dip_floor_is_a_preference_of_the_full_problem(gait):
