@@ -191,9 +191,10 @@ class ControllerConfig:
             together, >= 0: each planner call's beam search gets what is left (at most
             :attr:`PlannerConfig.beam_evaluations`), so a replanning spends at most
             ``replan_evaluations`` plus this (plus a batch a beam pass) with the least-violating
-            steps' own budget. 0 (default): each call's beam search has the planner's whole
-            budget (a footstep whose full problem and deeper relaxation both run one spends
-            it twice).
+            steps' own budget. 0 (the class default; the paper robot's preset,
+            ``configs/controller/paper.yaml``, has 40,000): each call's beam search has the
+            planner's whole budget (a footstep whose full problem and deeper relaxation both
+            run one spends it twice).
         tube_energy: replan within a step (replan mode) when the estimated state leaves the
             plan's tube: ``|theta_dot^2 - theta_dot*^2(theta)|`` above this fraction of
             ``theta_dot*^2(theta)`` (a push, a stall in the making, a plan made from a poor

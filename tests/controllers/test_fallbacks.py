@@ -301,7 +301,7 @@ def test_a_replanning_shares_its_beam_budget_across_its_planner_calls(
 ):
     """With ``replan_beam_evaluations`` the beam searches of one replanning share that budget:
     each planner call's beam gets what the calls before it left (here every call's beam
-    spends 15,000 and fails). 0, the default: no cap passed, each call's beam has the
+    spends 15,000 and fails). 0, the class default: no cap passed, each call's beam has the
     planner's own budget. The plan at reset (nothing to fall back on) is never capped."""
     cfg = ControllerConfig(replan_beam_evaluations=cap)
     ctrl = TransverseController("paper", "flat", cfg)
@@ -331,3 +331,16 @@ def test_a_replanning_shares_its_beam_budget_across_its_planner_calls(
     assert rec.fallback in ("previous plan", "least violation")
     with pytest.raises(ValueError, match="replan_beam_evaluations"):
         ControllerConfig(replan_beam_evaluations=-1)
+
+
+def test_one_beam_budget_per_replanning_is_the_paper_robots_default():
+    """The paper robot's preset (configs/controller/paper.yaml) caps a replanning's beam
+    searches at 40,000 step evaluations together; the class default, the robots without a
+    preset and ``replan_beam_evaluations=0`` keep each call's own budget (the earlier records'
+    setting, which their specs, agent configs and manifests pin)."""
+    assert ControllerConfig.for_robot("paper").replan_beam_evaluations == 40000
+    assert ControllerConfig().replan_beam_evaluations == 0
+    assert ControllerConfig.for_robot("classic").replan_beam_evaluations == 0
+    off = ControllerConfig.for_robot("paper", replan_beam_evaluations=0)
+    assert off.replan_beam_evaluations == 0
+    assert TransverseController("paper", "flat").config.replan_beam_evaluations == 40000
