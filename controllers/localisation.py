@@ -40,7 +40,7 @@ from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
-from scipy.ndimage import gaussian_filter1d
+from numba import njit
 
 __all__ = ["ESTIMATES", "NOMINAL_DRIFT", "LocalisationResult", "ScanLocaliser"]
 
@@ -54,6 +54,8 @@ NOMINAL_DRIFT = 0.005
 ESTIMATES = ("mean", "selected")
 _SUPPORT = 1e-12  # belief below this fraction of its peak counts as zero
 _RECENTRE = 0.01  # the grid follows the estimate once it is this far off [m]
+_BLUR_TRUNCATE = 5.0  # the odometry's blur is cut this many standard deviations out
+_NO_BLUR = np.ones(1)
 
 
 @dataclass(frozen=True)
@@ -191,10 +193,11 @@ class ScanLocaliser:
         L = abs(float(step))
         if not math.isfinite(L):
             raise ValueError(f"step must be finite, got {step!r}")
-        b = _shift_rows(self.belief, self.rates * L / self._du)
         blur = self.odometry_error * L / self._du
+        w = _NO_BLUR
         if blur > 0.05 and self.sigma < _MAX_SHIFT / 4:  # beyond that the scans cannot tell
-            b = gaussian_filter1d(b, blur, axis=1, mode="constant", truncate=5.0)
+            w = _gaussian_weights(blur, _BLUR_TRUNCATE)
+        b = _shift_and_blur(self.belief, self.rates * L / self._du, w)
         self.belief = b / b.sum()
         return self._recentre()
 
@@ -326,16 +329,38 @@ def _gaussian(x: np.ndarray, sigma: float) -> np.ndarray:
     return out
 
 
-def _shift_rows(p: np.ndarray, a: np.ndarray) -> np.ndarray:
+def _gaussian_weights(sigma: float, truncate: float) -> np.ndarray:
+    """The normalised Gaussian of standard deviation ``sigma`` [grid points] on the grid points
+    within ``truncate`` standard deviations, as ``scipy.ndimage.gaussian_filter1d`` makes it."""
+    radius = int(truncate * sigma + 0.5)
+    x = np.arange(-radius, radius + 1)
+    phi = np.exp(-0.5 / (sigma * sigma) * x**2)
+    return phi / phi.sum()
+
+
+@njit(cache=True)
+def _shift_and_blur(p, a, w):  # pragma: no cover - compiled
     """Each row ``j`` of ``p`` moved by ``a[j]`` grid points (linear interpolation; mass moved
-    off the grid is lost)."""
-    n = p.shape[1]
-    k = np.floor(-a).astype(int)  # new[j, i] = old[j, i - a[j]]
-    f = (-a - k)[:, None]
-    idx = np.arange(n)[None, :] + k[:, None]
-    out = np.zeros_like(p)
-    for shift, w in ((0, 1.0 - f), (1, f)):
-        j = idx + shift
-        ok = (j >= 0) & (j < n)
-        out += np.where(ok, np.take_along_axis(p, np.clip(j, 0, n - 1), axis=1), 0.0) * w
+    off the grid is lost), then correlated with the symmetric weights ``w`` (odd length; zero
+    beyond the grid): ``scipy.ndimage.correlate1d``'s sums in its order, so the same numbers as
+    that filter (``mode="constant"``) on the moved rows."""
+    nr, n = p.shape
+    r = (w.size - 1) // 2
+    out = np.empty_like(p)
+    line = np.zeros(n + 2 * r)  # one moved row with r zeros either side
+    for j in range(nr):
+        k = math.floor(-a[j])  # moved[i] = p[j, i - a[j]]
+        f = -a[j] - k
+        for i in range(n):
+            s = i + k
+            t0 = p[j, s] if 0 <= s < n else 0.0
+            t1 = p[j, s + 1] if 0 <= s + 1 < n else 0.0
+            line[r + i] = (0.0 + t0 * (1.0 - f)) + t1 * f
+        acc = out[j]
+        for i in range(n):
+            acc[i] = line[r + i] * w[r]
+        for d in range(r, 0, -1):  # the outermost pair first
+            wd = w[r - d]
+            for i in range(n):
+                acc[i] += (line[r + i - d] + line[r + i + d]) * wd
     return out

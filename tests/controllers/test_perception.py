@@ -261,3 +261,36 @@ def test_localiser_drift_is_re_referred_to_a_new_leg_length():
     assert loc.drift == pytest.approx((1 + drift) / 1.04 - 1, abs=1e-3)
     with pytest.raises(ValueError, match="ratio"):
         loc.rescale(0.0)
+
+
+def _moved_rows(p, a):
+    """Each row of ``p`` moved by ``a[j]`` grid points by linear interpolation, zero beyond the
+    grid (numpy)."""
+    n = p.shape[1]
+    grid = np.arange(-1, n + 1)
+    return np.stack(
+        [np.interp(np.arange(n) - aj, grid, np.r_[0.0, row, 0.0]) for row, aj in zip(p, a)]
+    )
+
+
+@pytest.mark.parametrize("sigma", [None, 0.3, 1.0, 6.0, 12.5])
+def test_the_belief_moves_and_blurs_as_interpolation_and_scipy_filter_do(sigma):
+    """The predict step's compiled kernel: rows moved by their drift (linear interpolation, mass
+    off the grid lost) and blurred by the odometry's Gaussian, as numpy's interpolation and
+    SciPy's ``gaussian_filter1d`` (``mode="constant"``) give them."""
+    from scipy.ndimage import gaussian_filter1d
+
+    from controllers.localisation import _BLUR_TRUNCATE, _NO_BLUR, _gaussian_weights
+    from controllers.localisation import _shift_and_blur as shift_and_blur
+
+    rng = np.random.default_rng(3)
+    p = rng.random((9, 61)) * (rng.random((9, 61)) < 0.7)
+    a = np.r_[rng.normal(0.0, 4.0, 8), 70.0]  # the last row moved off the grid entirely
+    moved = _moved_rows(p, a)
+    w = _NO_BLUR if sigma is None else _gaussian_weights(sigma, _BLUR_TRUNCATE)
+    got = shift_and_blur(p, a, w)
+    want = moved
+    if sigma is not None:
+        want = gaussian_filter1d(moved, sigma, axis=1, mode="constant", truncate=_BLUR_TRUNCATE)
+    np.testing.assert_allclose(got, want, rtol=1e-12, atol=1e-15)
+    assert np.all(got[-1] == 0.0)
