@@ -22,7 +22,8 @@ import argparse
 from pathlib import Path
 
 from agents.compare import CONFIG_DIR, SETTINGS, compare, markdown_table
-from agents.config import EVAL_SEED_OFFSET, TEST_SEED, seed_label
+from agents.config import TEST_SEED, seed_label
+from agents.evaluate import eval_seeds
 from agents.train import set_threads
 from commands.cli import add_backend_arguments, int_range
 from commands.evaluate import print_table
@@ -110,8 +111,8 @@ def run(args: argparse.Namespace) -> int:
     if args.dry_run:
         print(markdown_table(result.rows), end="")
     else:
-        first = EVAL_SEED_OFFSET + args.seed
-        courses = seed_label(first, first + args.episodes - 1)
+        seeds = eval_seeds(args.seed, args.episodes)
+        courses = seed_label(seeds[0], seeds[-1])
         title = f"{courses} (--seed {args.seed}), {args.episodes} episodes"
         print_table(result.evaluations, title=title)
         for g in result.across_seeds.get("groups", []):

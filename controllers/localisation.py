@@ -355,7 +355,7 @@ def _shift_and_blur(p, a, w):  # pragma: no cover - compiled
             s = i + k
             t0 = p[j, s] if 0 <= s < n else 0.0
             t1 = p[j, s + 1] if 0 <= s + 1 < n else 0.0
-            line[r + i] = (0.0 + t0 * (1.0 - f)) + t1 * f
+            line[r + i] = t0 * (1.0 - f) + t1 * f
         acc = out[j]
         for i in range(n):
             acc[i] = line[r + i] * w[r]
