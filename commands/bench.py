@@ -12,6 +12,7 @@ the planner section (e.g. compiled_sqp=0, the previous default).
 from __future__ import annotations
 
 import argparse
+import gc
 import os
 import time
 from collections.abc import Callable
@@ -416,7 +417,9 @@ def _closed_loop_replanning(
     any machine); the env steps per second of the whole loop (policy and env) against the bare
     env on the same courses under zero input; and the time of its online identification per
     fit (median, 95th percentile, largest). Each setting first walks the first
-    :data:`_WARM_UP_STEPS` steps of the first course, untimed. Then each course is walked with
+    :data:`_WARM_UP_STEPS` steps of the first course, untimed, then Python's garbage is
+    collected (what the imports and the compilation left; the timed walks' own collections
+    are timed). Then each course is walked with
     every setting and then by the bare env (as many steps as the first setting's walk) before
     the next course, so that a machine whose speed drifts during the run slows them alike.
     ``base``: planner changes of the whole run (``--planner``, named in the title)."""
@@ -430,6 +433,9 @@ def _closed_loop_replanning(
     zero = np.zeros(1, dtype=np.float32)
     for policy in policies:  # warm-up, untimed: the first footsteps' planning and fits
         _walk(env, policy, 1_001_000, policy.reset, _WARM_UP_STEPS)
+    # the objects left by imports and compilation collected now, not in a timed footstep
+    # (a full collection takes about as long as the slowest replans)
+    gc.collect()
     for k in range(episodes):
         order = range(len(policies)) if k % 2 == 0 else range(len(policies) - 1, -1, -1)
         for i in order:  # every other course in the reverse order: neither always walks first

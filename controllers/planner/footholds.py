@@ -37,6 +37,7 @@ _CHAIN_STRIDE = 4  # candidates tried first when looking for a chain (then all o
 _LANDING_SLACK = np.array([0.008, 0.004])  # touchdown errors a foothold chain should tolerate [m]
 _MEMO_LIMIT = 65536  # entries of a foothold memo before it is cleared
 _MEMO_TERRAINS = 4  # terrains whose chain lengths are kept
+_UNRANKED = 2**62  # sorts a candidate not ranked after every ranked one
 
 
 class TerrainMap:
@@ -207,15 +208,25 @@ def candidate_footholds(
         ``(x, y, reason)``: candidate foothold coordinates [m], best first (empty if none),
         and why candidates were rejected when empty.
     """
-    x0, y0 = float(stance[0]), float(stance[1])
-    n = int(math.floor((rules.step_max - rules.step_min) / rules.resolution)) + 1
+    return _candidate_footholds(
+        tmap, stance, rules, _rules_array(rules), l, theta_target, sigma_target
+    )
+
+
+def _candidate_footholds(
+    tmap: TerrainMap,
+    stance: tuple[float, float],
+    rules: FootholdRules,
+    R: np.ndarray,
+    l: float,  # noqa: E741
+    theta_target: float | None,
+    sigma_target: float | None,
+) -> tuple[np.ndarray, np.ndarray, str]:
+    """:func:`candidate_footholds` with the rules also as :func:`_rules_array` gives them."""
     mode = 0 if theta_target is None else (1 if sigma_target is None else 2)
-    x, y, seen = _foothold_table(
-        x0, y0, n, rules.step_min, rules.resolution, tmap.xs, tmap.ys, tmap.features,
-        tmap._face_arr, rules.edge_margin, rules.drop_margin, rules.rise_margin,
-        rules.drop_edge_margin, rules.max_rise, rules.max_drop, rules.q1_min, rules.q1_max,
-        float(l), rules.step_length,
-        math.nan if theta_target is None else float(theta_target),
+    x, y, seen = _rule_table(
+        float(stance[0]), float(stance[1]), R, tmap.xs, tmap.ys, tmap.features, tmap._face_arr,
+        float(l), math.nan if theta_target is None else float(theta_target),
         math.nan if sigma_target is None else float(sigma_target), mode,
     )  # fmt: skip
     if x.size:
@@ -308,8 +319,9 @@ class FootholdChains:
         depth = min(int(depth), _CHAIN_DEPTH)
         # without a face or kink within reach every candidate continues alike (smooth ground)
         reach = stance[0] + (depth + 1) * rules.step_max + max(_LANDING_SLACK) + 2.0 * l
-        f = tmap.features
-        ranked = depth > 0 and np.any((f > stance[0] - rules.step_max) & (f < reach))
+        f = tmap.features  # (sorted)
+        first_ahead = int(np.searchsorted(f, stance[0] - rules.step_max, side="right"))
+        ranked = depth > 0 and first_ahead < f.size and f[first_ahead] < reach
         k0, memo = self._memo(tmap, depth)
         rank, first = _rank_candidates(
             cx, math.nan if warm_x is None else float(warm_x), rules.resolution, int(need),
@@ -324,10 +336,8 @@ class FootholdChains:
                 picks.append(k)
             return len(picks) >= need
 
-        done = rank >= 0
-        order = np.r_[
-            np.nonzero(done)[0][np.argsort(rank[done], kind="stable")], np.nonzero(~done)[0]
-        ].astype(int)
+        # the ranked candidates by rank (in list order within a rank), then the others in order
+        order = np.argsort(np.where(rank >= 0, rank, _UNRANKED), kind="stable")
         for k in order:  # the picks not settled by the rank-0 candidates
             if offer(int(k)):
                 break
@@ -364,9 +374,9 @@ class FootholdChains:
         relaxed rules where the rules give none; the last item says whether those were used
         (``reason`` is then the rules' one)."""
         args = (self.l, theta_target, sigma_target)
-        cx, cy, why = candidate_footholds(tmap, stance, self.rules, *args)
+        cx, cy, why = _candidate_footholds(tmap, stance, self.rules, self._rules_arr, *args)
         if cx.size == 0 and relaxed and self.relaxed is not None:
-            rx, ry, _ = candidate_footholds(tmap, stance, self.relaxed, *args)
+            rx, ry, _ = _candidate_footholds(tmap, stance, self.relaxed, self._relaxed_arr, *args)
             if rx.size:
                 return rx, ry, why, True
         return cx, cy, why, False
@@ -516,14 +526,21 @@ def _rules_array(rules: FootholdRules) -> np.ndarray:
 
 
 @njit(cache=True, error_model="numpy")
+def _rule_table(x0, y0, R, tx, ty, features, faces, l, theta_target, sigma_target, mode):
+    """:func:`_foothold_table` from the stance foot ``(x0, y0)`` [m] under the rules ``R``
+    (:func:`_rules_array`)."""
+    return _foothold_table(
+        x0, y0, int(R[0]), R[1], R[2], tx, ty, features, faces, R[3], R[4], R[5], R[6], R[7],
+        R[8], R[9], R[10], l, R[11], theta_target, sigma_target, mode,
+    )  # fmt: skip
+
+
+@njit(cache=True, error_model="numpy")
 def _chain_table(x, R, tx, ty, features, faces, l):
     """The admissible footholds from a stance foot at ``x`` [m] under the rules ``R``
     (:func:`_rules_array`), ranked by step length (:func:`candidate_footholds`)."""
     y = terrain_height(tx, ty, tx.size, x)
-    cx, _, _ = _foothold_table(
-        x, y, int(R[0]), R[1], R[2], tx, ty, features, faces, R[3], R[4], R[5], R[6], R[7],
-        R[8], R[9], R[10], l, R[11], math.nan, math.nan, 0,
-    )  # fmt: skip
+    cx, _, _ = _rule_table(x, y, R, tx, ty, features, faces, l, math.nan, math.nan, 0)
     return cx
 
 

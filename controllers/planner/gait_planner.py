@@ -12,6 +12,7 @@ import numpy as np
 
 from envs.config_util import finite_pair, integer_setting
 from envs.physics.params import RobotParams, as_params
+from envs.physics.terrain import Terrain
 
 from ..numerics import one_blas_thread
 from .config import PlannerConfig, PlanningError
@@ -25,6 +26,7 @@ __all__ = ["GaitPlanner"]
 
 _UNBOUNDED = 2**62  # evaluations of a search without a budget
 _SOLUTIONS_LIMIT = 4096  # solved step problems kept while replanning before they are forgotten
+_MAPS_KEPT = 4  # terrain maps a planner keeps (see GaitPlanner._terrain_map)
 
 
 class GaitPlanner:
@@ -69,6 +71,20 @@ class GaitPlanner:
         )
         self._gait_source: GaitPlanner = self  # the planner whose periodic gait steps pull to
         self._gait_key: tuple | None = None  # the robot and settings in the gait cache's key
+        self._maps: dict[bytes, TerrainMap] = {}  # see _terrain_map
+
+    def _terrain_map(self, terrain: Any) -> TerrainMap:
+        """:meth:`TerrainMap.coerce`, the maps of the last few terrains kept: a controller
+        passes its map at every footstep, and a :class:`Terrain` is its polyline alone."""
+        if not isinstance(terrain, Terrain):
+            return TerrainMap.coerce(terrain)
+        key = terrain.xs.tobytes() + terrain.ys.tobytes()
+        tmap = self._maps.get(key)
+        if tmap is None:
+            if len(self._maps) >= _MAPS_KEPT:
+                self._maps.clear()
+            tmap = self._maps[key] = TerrainMap(terrain)
+        return tmap
 
     def relaxed(self, **changes: Any) -> GaitPlanner:
         """A planner with the settings ``changes`` (fields of :class:`PlannerConfig`, e.g. a
@@ -232,7 +248,7 @@ class GaitPlanner:
         stance = finite_pair("stance_foot", stance_foot, "m")
         if not qd[1] > 0:
             raise PlanningError(0, "post-impact theta_dot positive", f"q2d = {qd[1]:.4g} rad/s")
-        tmap = TerrainMap.coerce(terrain)
+        tmap = self._terrain_map(terrain)
         # a call without a previous plan starts afresh (its result depends on its inputs only)
         if previous_plan is None or len(self._solutions) > _SOLUTIONS_LIMIT:
             self._solutions.clear()

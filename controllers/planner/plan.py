@@ -12,6 +12,7 @@ from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
+from numba import njit
 
 from envs.physics import model
 from envs.physics.params import RobotParams
@@ -21,6 +22,26 @@ from ..bezier import BezierConstraint
 from .config import PlannerConfig
 
 __all__ = ["PeriodicGait", "Plan", "StepPlan"]
+
+
+@njit(cache=True, error_model="numpy")
+def _step_profile(P, ph, th, dph, ddph, thetadot_plus_sq, q):
+    """A step's nominal profile on its grid ``th`` [rad] (the constraint's ``ph, dph, ddph``
+    there), in one compiled call of :mod:`controllers.reduced`: ``psi, Gam``, ``theta_dot^2 =
+    psi theta_dot_plus^2 + Gam`` [rad^2/s^2], the time [s] (where ``theta_dot^2 > 0``), the
+    nominal input, and the impact's gain and post-impact slope (``q``: the grid's
+    cumulative-integral matrix)."""
+    a, b, g = rd.reduced_coefficients(P, ph, th, dph, ddph)
+    n = th.size
+    half = 0.5 * (th[n - 1] - th[0])
+    psi, gam = np.empty(n), np.empty(n)
+    rd.grid_reduced_integral(a, b, g, q, half, -np.inf, psi, gam)
+    f = psi * thetadot_plus_sq + gam
+    thd, time = np.empty(n), np.empty(n)
+    rd.grid_step_time(f, q, half, 0.0, thd, time)
+    u = rd.nominal_input(P, ph, th, dph, ddph, np.sqrt(f))
+    delta, slope = rd.impact_along_constraint(P, ph[n - 1], dph[n - 1])
+    return psi, gam, f, time, u, delta, slope
 
 
 class StepPlan:
@@ -64,20 +85,20 @@ class StepPlan:
         self.note = ""
         th = rd.phase_grid(constraint.theta_plus, constraint.theta_minus, grid)
         ph, dph, ddph = constraint.derivatives(th)
-        a, b, g = rd.reduced_coefficients(P, ph, th, dph, ddph)
-        psi, gam = rd.reduced_integral(th, a, b, g)
-        f = psi * thetadot_plus**2 + gam
+        psi, gam, f, time, u, delta, slope = _step_profile(
+            P, ph, th, dph, ddph, float(thetadot_plus) ** 2, rd.cumulative_integral_matrix(grid)
+        )
+        if np.any(~(f > 0)):
+            raise ValueError("step_time: theta_dot^2 must be > 0 on the whole grid (one grid)")
         self.theta_grid = th
         self.psi_grid, self.gam_grid = psi, gam
         self.thetadot_sq_grid = f
-        self.time_grid = rd.step_time(th, f)
-        self.input_grid = rd.nominal_input(P, ph, th, dph, ddph, np.sqrt(f))
+        self.time_grid = time
+        self.input_grid = u
         self.thetadot_plus = float(thetadot_plus)
         self.thetadot_minus = float(np.sqrt(f[-1]))
         self.duration = float(self.time_grid[-1])
-        self.delta, self.slope_plus = (
-            float(v) for v in rd.impact_along_constraint(P, ph[-1], dph[-1])
-        )
+        self.delta, self.slope_plus = float(delta), float(slope)
         self._f = rd.ChebyshevSeries(f, th[0], th[-1])
         self._t = rd.ChebyshevSeries(self.time_grid, th[0], th[-1])
         self._psi = rd.ChebyshevSeries(psi, th[0], th[-1])

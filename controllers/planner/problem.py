@@ -43,7 +43,7 @@ from .footholds import TerrainMap
 from .kernel import StepGrids, StepGround, StepScalars, StepSettings
 from .plan import PeriodicGait
 from .slsqp import minimize_slsqp
-from .sqp import FD_STEP, fd_quotients, sqp_solve
+from .sqp import FD_STEP, NO_START, NO_START_G, fd_quotients, sqp_solve
 
 __all__ = [
     "CONSTRAINT_GROUPS",
@@ -145,6 +145,7 @@ class ConstraintLayout(NamedTuple):
     packed: int
 
 
+@functools.lru_cache(maxsize=64)
 def constraint_layout(nodes: int, checks: int, faces: int, periodic: bool) -> ConstraintLayout:
     """The layout of :data:`CONSTRAINT_GROUPS` for ``nodes = N`` Chebyshev nodes, ``checks = K +
     1`` check points and ``faces`` vertical faces (``periodic``: with the periodic-gait group)."""
@@ -464,21 +465,20 @@ class StepEvaluator:
             if math.isfinite(fx.thetadot_minus_ref):
                 thm_ref = fx.thetadot_minus_ref
         scalars = StepScalars(
-            fmin=fmin,
-            xs=xs,
-            ys=ys,
-            slope_stance=slope_stance,
-            slope_foot=slope_foot,
-            foot_x=fx.foothold[0],
-            theta_plus=fx.theta_plus,
-            span=fx.theta_minus - fx.theta_plus,
-            wscale=self.wscale,
-            v_target=v_target,
-            thetadot_minus_ref=thm_ref,
-            slope_ref=slope_ref,
-            delta_ref=delta_ref,
+            fmin=float(fmin),
+            xs=float(xs),
+            ys=float(ys),
+            slope_stance=float(slope_stance),
+            slope_foot=float(slope_foot),
+            foot_x=float(fx.foothold[0]),
+            theta_plus=float(fx.theta_plus),
+            span=float(fx.theta_minus - fx.theta_plus),
+            wscale=float(self.wscale),
+            v_target=float(v_target),
+            thetadot_minus_ref=float(thm_ref),
+            slope_ref=float(slope_ref),
+            delta_ref=float(delta_ref),
         )
-        scalars = StepScalars(*(float(v) for v in scalars))
         fixed = (fx.a0, fx.a_last, fx.slope, fx.theta_plus, fx.theta_minus, fx.thetadot_plus)
         problem = (
             tuple(float(v) for v in fixed),
@@ -651,6 +651,10 @@ class BatchProblem:
         self._points: dict[bytes, tuple[np.ndarray, np.ndarray, np.ndarray]] = {}
         # points accounted in the budget but not evaluated yet (forward differences put off)
         self._charged: set[bytes] = set()
+        # the costs and constraints of the last points :meth:`_residual_rows` evaluated, and
+        # of the last :meth:`scaling`'s (its point as bytes first), for the compiled solve
+        self._start_rows: tuple = ()
+        self._start: tuple = ()
 
     def _fill(self, X: np.ndarray, payload: bool = False) -> tuple[np.ndarray, np.ndarray] | None:
         """Evaluate the rows of ``X`` not evaluated yet (with ``payload``, also the payload of
@@ -765,6 +769,7 @@ class BatchProblem:
         X = _fd_points(x0)
         if self.residual_values is not None:
             R = self._residual_rows(X)
+            self._start = (x0.tobytes(), *self._start_rows)
         else:
             rows = self.evaluate_many(X, payload=True)
             R = np.stack([self.residuals(p)[r] for _, _, p, r in rows])
@@ -786,6 +791,7 @@ class BatchProblem:
         cost, g, R = self.residual_values(X)
         for i in todo:
             self.cache[keys[i]] = (float(cost[i]), g[i], None, i)
+        self._start_rows = (cost, g)
         return R
 
     def minimize(
@@ -860,6 +866,11 @@ class BatchProblem:
             self.budget.spend(0)  # raises if already spent (or past its deadline)
             left = max(self.budget.evaluations - self.budget.used, 0)
         P, k, common, first, second, pair = self.compiled
+        # the scaling's rows at x0 are the solve's first Jacobian's: not evaluated again
+        start = self._start
+        cost0, g0 = (
+            (start[1], start[2]) if start and start[0] == x0.tobytes() else (NO_START, NO_START_G)
+        )
         rule = (
             float(_STALL_ITERATIONS),
             float(_STALL_WINDOW),
@@ -869,6 +880,7 @@ class BatchProblem:
         x, rows, status, _ = sqp_solve(
             P, x0, np.ascontiguousarray(T), k, common, first, second, pair,
             int(maxiter), float(ftol), bool(stall), int(left), rule,
+            np.ascontiguousarray(cost0), np.ascontiguousarray(g0),
         )  # fmt: skip
         if self.budget is not None:
             self.budget.used += int(rows)

@@ -59,6 +59,8 @@ _ARMIJO = 0.1  # sufficient decrease of the merit function, fraction of its slop
 _LINE_TRIALS = 10  # a line search accepts its point after this many shortened ones
 _ALPHA_MIN = 0.1  # least shortening of a line search's step
 _RESETS = 5  # quasi-Newton models a solve may start (the first included)
+NO_START = np.empty(0)  # sqp_solve's start rows not given
+NO_START_G = np.empty((0, 0))
 
 
 # ---------------------------------------------------------------------------- QP
@@ -384,12 +386,7 @@ def _jacobian(P, x0, T, z, f, c, k1, common, first, second, pair, X, cost, g, gr
     forward differences in the free coefficients ``x = x0 + T z`` (``n`` kernel rows;
     :func:`fd_quotients`, as :class:`.problem.BatchProblem` takes them), mapped through
     ``T``. ``X``, ``cost``, ``g``: work arrays of ``n + 1`` rows."""
-    n = z.size
-    x = x0 + T @ z
-    for i in range(n + 1):
-        X[i] = x
-    for i in range(n):
-        X[1 + i, i] += FD_STEP
+    _fd_points(x0 + T @ z, X)
     cf, gf = _values(P, X[1:], k1, common, first, second, pair)
     cost[0] = f
     cost[1:] = cf
@@ -398,6 +395,16 @@ def _jacobian(P, x0, T, z, f, c, k1, common, first, second, pair, X, cost, g, gr
     gx, Axt = fd_quotients(X, cost, g)
     grad[:] = T.T @ gx
     A[:, :] = np.ascontiguousarray(Axt.T) @ T
+
+
+@_jit
+def _fd_points(x, X):
+    """``x`` and its forward-difference neighbours, one coordinate each, into the rows of
+    ``X`` (``(k + 1, k)``)."""
+    for i in range(X.shape[0]):
+        X[i] = x
+    for i in range(x.size):
+        X[1 + i, i] += FD_STEP
 
 
 @_jit
@@ -411,7 +418,10 @@ def _merit_penalty(c, mu):
 
 
 @_jit
-def sqp_solve(P, x0, T, k1, common, first, second, pair, maxiter, ftol, stall, budget, stall_rule):
+def sqp_solve(
+    P, x0, T, k1, common, first, second, pair, maxiter, ftol, stall, budget, stall_rule,
+    start_cost=NO_START, start_g=NO_START_G,
+):  # fmt: skip
     """Minimise a step problem's cost subject to its packed constraints ``>= 0`` from ``x0``,
     with the iteration of Kraft's SLSQP (SciPy's ``slsqp.c``): its QP, its augmented QP where
     the linearisation is inconsistent, its L1 line search (which takes its eleventh point
@@ -430,6 +440,10 @@ def sqp_solve(P, x0, T, k1, common, first, second, pair, maxiter, ftol, stall, b
         stall: end a run that stops making progress towards feasibility
             (``stall_rule = (iterations, window, gain, violation)``: see :mod:`.problem`).
         budget: kernel rows the solve may evaluate.
+        start_cost, start_g: the costs ``(k + 1,)`` and packed constraints ``(k + 1, m)`` at
+            ``x0`` and its forward-difference points (:func:`fd_quotients`'s rows, the steps
+            in ``x``), already evaluated (by the Gauss-Newton scaling): the solve's first
+            Jacobian without evaluating them again. Empty (the default): evaluated here.
 
     Returns:
         ``(x, rows, status, iterations)``: the final point, the rows evaluated,
@@ -437,21 +451,34 @@ def sqp_solve(P, x0, T, k1, common, first, second, pair, maxiter, ftol, stall, b
     """
     n = x0.size
     s_iter, s_window, s_gain, s_viol = stall_rule
-    if budget < 1 + n:
+    given = start_cost.size == n + 1
+    if budget < 1 + n and not given:
         return x0.copy(), 0, 2, 0
-    cost, g = _values(P, x0.reshape(1, n), k1, common, first, second, pair)
-    rows = 1
-    f = cost[0]
-    c = g[0].copy()
-    m = c.size
     z = np.zeros(n)
     grad = np.zeros(n)
-    A = np.zeros((m, n))
     X = np.empty((n + 1, n))
     cost_fd = np.empty(n + 1)
-    g_fd = np.empty((n + 1, m))
-    _jacobian(P, x0, T, z, f, c, k1, common, first, second, pair, X, cost_fd, g_fd, grad, A)
-    rows += n
+    if given:
+        rows = 0
+        f = start_cost[0]
+        c = start_g[0].copy()
+        m = c.size
+        A = np.zeros((m, n))
+        g_fd = np.empty((n + 1, m))
+        _fd_points(x0, X)
+        gx, Axt = fd_quotients(X, start_cost, start_g)
+        grad[:] = T.T @ gx
+        A[:, :] = np.ascontiguousarray(Axt.T) @ T
+    else:
+        cost, g = _values(P, x0.reshape(1, n), k1, common, first, second, pair)
+        rows = 1
+        f = cost[0]
+        c = g[0].copy()
+        m = c.size
+        A = np.zeros((m, n))
+        g_fd = np.empty((n + 1, m))
+        _jacobian(P, x0, T, z, f, c, k1, common, first, second, pair, X, cost_fd, g_fd, grad, A)
+        rows += n
     L = np.eye(n)
     D = np.ones(n)
     mu = np.zeros(m)

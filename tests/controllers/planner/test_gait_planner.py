@@ -136,3 +136,21 @@ def test_the_dip_floor_bounds_every_step_by_its_own_start_speed(planners, scalin
     with pytest.raises(PlanningError) as err:
         plan({"dip_floor": 0.7})
     assert err.value.step == 0
+
+
+def test_a_planner_keeps_the_map_of_a_terrain_it_plans_on_again(planners):
+    """Planning again on a terrain equal to the last one (a controller's map at every footstep)
+    reuses its map, and the plan is the one a fresh planner makes; another terrain gets its
+    own map."""
+    planner = GaitPlanner("paper")
+    g = planner.periodic_gait()
+    stairs = Terrain.stairs([0.4, 0.62], [-0.01, -0.01])
+    first = planner.plan(stairs, (g.q, g.qd), (0.0, 0.0), horizon=3)
+    again = Terrain.from_dict(stairs.to_dict())
+    assert again is not stairs
+    assert planner._terrain_map(again) is planner._terrain_map(stairs)
+    assert planner._terrain_map(Terrain.flat()) is not planner._terrain_map(stairs)
+    second = planner.plan(again, (g.q, g.qd), (0.0, 0.0), horizon=3)
+    fresh = GaitPlanner("paper").plan(again, (g.q, g.qd), (0.0, 0.0), horizon=3)
+    for a, b, c in zip(first.steps, second.steps, fresh.steps, strict=True):
+        assert np.array_equal(a.coeffs, b.coeffs) and np.array_equal(b.coeffs, c.coeffs)

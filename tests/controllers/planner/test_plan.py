@@ -214,3 +214,22 @@ def test_planned_arming_phase_matches_the_simulator(planners, plans):
                 break
         assert ev.status[0] == 0 and ev.n_impacts[0] == 1
         assert armed_at == pytest.approx(step.arm_theta, abs=5e-4)
+
+
+@pytest.mark.parametrize("robot,terrain", [("paper", "paper_stairs"), ("classic", "flat")])
+def test_a_step_plans_profile_is_the_reduced_dynamics_of_its_constraint(plans, robot, terrain):
+    """Each planned step's nominal profile (compiled in one call) is, to the last bit, what
+    :mod:`controllers.reduced`'s functions give on its grid: ``psi, Gam``, ``theta_dot^2``,
+    the time, the input and the impact's gain and slope."""
+    for st in plans[robot, terrain].steps:
+        th = st.theta_grid
+        ph, dph, ddph = st.constraint.derivatives(th)
+        a, b, g = rd.reduced_coefficients(st.P, ph, th, dph, ddph)
+        psi, gam = rd.reduced_integral(th, a, b, g)
+        f = psi * st.thetadot_plus**2 + gam
+        assert np.array_equal(st.psi_grid, psi) and np.array_equal(st.gam_grid, gam)
+        assert np.array_equal(st.thetadot_sq_grid, f)
+        assert np.array_equal(st.time_grid, rd.step_time(th, f))
+        assert np.array_equal(st.input_grid, rd.nominal_input(st.P, ph, th, dph, ddph, np.sqrt(f)))
+        delta, slope = rd.impact_along_constraint(st.P, ph[-1], dph[-1])
+        assert (st.delta, st.slope_plus) == (float(delta), float(slope))

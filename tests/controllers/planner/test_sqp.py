@@ -8,6 +8,7 @@ from scipy.optimize import minimize, nnls
 from controllers.planner import GaitPlanner
 from controllers.planner.problem import BatchProblem, BudgetExhausted, SearchBudget
 from controllers.planner.sqp import (
+    FD_STEP,
     _augmented_qp,
     _ldl_update,
     _least_squares,
@@ -162,15 +163,16 @@ def test_a_compiled_solve_stops_at_its_budget(planners):
     """A solve whose budget runs out raises :class:`BudgetExhausted` with the budget spent
     no further than one Jacobian beyond it, and marks the budget exhausted."""
     sm, fx, fx2, X = _pair(planners)
+    # (the whole solve takes 14 rows: the scaling's 7, which are its first Jacobian's too)
     with pytest.raises(BudgetExhausted):
-        _solve(sm, fx, fx2, X[0], True, budget=20)
-    b = SearchBudget(20)
+        _solve(sm, fx, fx2, X[0], True, budget=10)
+    b = SearchBudget(10)
     prob = BatchProblem(
         lambda X: None, b, lambda ev: None, *sm.solve_functions(fx, fx2), sm.kernel_args(fx, fx2)
     )
     with pytest.raises(BudgetExhausted):
         prob.minimize(X[0], 60, 1e-7, scaled=True)
-    assert b.exhausted and b.used <= 20
+    assert b.exhausted and b.used <= 10
 
 
 @pytest.mark.parametrize("terrain", ["paper_stairs", "blocks_high"])
@@ -198,3 +200,47 @@ def test_sqp_solve_runs_directly(planners):
     )
     assert status == 0 and 0 < rows < 200 and it >= 1
     assert np.min(sm.step_values(fx, x[None])[1]) >= -1e-7
+
+
+def test_a_solve_given_its_start_rows_is_the_same_solve_without_evaluating_them(planners):
+    """The compiled solve given the costs and constraints at its start and its
+    forward-difference points (the scaling's rows) ends where it ends evaluating them itself,
+    to the last bit, with exactly those ``k + 1`` rows fewer."""
+    sm, fx, fx2, X = _pair(planners)
+    P, k, common, first, second, pair = sm.kernel_args(fx, fx2)
+    rule = (25.0, 5.0, 0.95, 1e-4)
+    for x0 in X[:3]:
+        x0 = np.ascontiguousarray(x0)
+        T = BatchProblem(
+            lambda X: None, None, lambda ev: None, *sm.solve_functions(fx, fx2)
+        ).scaling(x0)
+        args = (P, x0, T, k, common, first, second, pair, 60, 1e-7, False, 10**6, rule)
+        x, rows, status, it = sqp_solve(*args)
+        pts = x0 + np.vstack([np.zeros(x0.size), FD_STEP * np.eye(x0.size)])
+        cost, g = sm.pair_values(fx, fx2, pts)
+        x2, rows2, status2, it2 = sqp_solve(*args, cost, np.ascontiguousarray(g))
+        assert np.array_equal(x, x2) and (status, it) == (status2, it2)
+        assert rows2 == rows - (x0.size + 1)
+
+
+def test_a_minimize_spends_the_scalings_rows_once(planners):
+    """A scaled solve through :class:`BatchProblem` accounts the scaling's rows once: its
+    budget's count is the rows the compiled solve evaluated plus the scaling's ``k + 1``."""
+    sm, fx, fx2, X = _pair(planners)
+    b = SearchBudget(10**6)
+    prob = BatchProblem(
+        lambda X: None, b, lambda ev: None, *sm.solve_functions(fx, fx2), sm.kernel_args(fx, fx2)
+    )
+    x0 = np.ascontiguousarray(X[0])
+    T = prob.scaling(x0)
+    P, k, common, first, second, pair = sm.kernel_args(fx, fx2)
+    rule = (25.0, 5.0, 0.95, 1e-4)
+    _, rows, _, _ = sqp_solve(
+        P, x0, T, k, common, first, second, pair, 60, 1e-7, False, 10**6, rule
+    )
+    b.used = 0
+    prob = BatchProblem(
+        lambda X: None, b, lambda ev: None, *sm.solve_functions(fx, fx2), sm.kernel_args(fx, fx2)
+    )
+    prob.minimize(x0, 60, 1e-7, scaled=True)
+    assert b.used == rows  # the scaling's k + 1 rows and the solve's rows - (k + 1)
