@@ -323,27 +323,12 @@ class FootholdChains:
         first_ahead = int(np.searchsorted(f, stance[0] - rules.step_max, side="right"))
         ranked = depth > 0 and first_ahead < f.size and f[first_ahead] < reach
         k0, memo = self._memo(tmap, depth)
-        rank, first = _rank_candidates(
+        order, picks = _ranked_order(
             cx, math.nan if warm_x is None else float(warm_x), rules.resolution, int(need),
             float(self.spacing), depth, bool(ranked), memo, k0, self._rules_arr,
             self._relaxed_arr, tmap.xs, tmap.ys, tmap.features, tmap._face_arr, float(self.l),
         )  # fmt: skip
-        picks: list[int] = [int(k) for k in first]
-
-        def offer(k: int) -> bool:
-            """Pick candidate ``k`` if it is spaced from the picks; whether the picks are done."""
-            if len(picks) < need and all(abs(cx[k] - cx[p]) >= self.spacing for p in picks):
-                picks.append(k)
-            return len(picks) >= need
-
-        # the ranked candidates by rank (in list order within a rank), then the others in order
-        order = np.argsort(np.where(rank >= 0, rank, _UNRANKED), kind="stable")
-        for k in order:  # the picks not settled by the rank-0 candidates
-            if offer(int(k)):
-                break
-        position = np.empty(cx.size, dtype=int)
-        position[order] = np.arange(cx.size)
-        return cx[order], cy[order], [int(position[k]) for k in picks], why
+        return cx[order], cy[order], [int(k) for k in picks], why
 
     def landing_rank(self, tmap: TerrainMap, x: float, depth: int) -> int:
         """0 if a chain of ``depth`` footholds continues from ``x`` [m] however far the foot
@@ -628,6 +613,41 @@ def _rank_candidates(
             if npk >= need:
                 break
     return rank, picks[:npk]
+
+
+@njit(cache=True, error_model="numpy")
+def _ranked_order(
+    cx, warm_x, res, need, spacing, depth, ranked, memo, k0, rules, relaxed_rules, tx, ty,
+    features, faces, l,
+):  # fmt: skip
+    """The order of :meth:`FootholdChains.ranked`'s candidates (the ranked ones by rank, in
+    list order within a rank, then the others in list order) and its picks as positions in
+    that order: :func:`_rank_candidates`'s, then candidates in that order ``spacing`` [m]
+    from the picks, up to ``need``."""
+    rank, first = _rank_candidates(
+        cx, warm_x, res, need, spacing, depth, ranked, memo, k0, rules, relaxed_rules, tx, ty,
+        features, faces, l,
+    )  # fmt: skip
+    n = cx.size
+    key = np.empty(n, dtype=np.int64)
+    for k in range(n):
+        key[k] = rank[k] if rank[k] >= 0 else _UNRANKED
+    order = np.argsort(key, kind="mergesort")
+    picks = np.empty(max(need, 0), dtype=np.int64)
+    npk = first.size
+    picks[:npk] = first
+    if npk < need:
+        for k in order:  # the picks not settled by the rank-0 candidates
+            npk = _offer(k, cx, picks, npk, need, spacing)
+            if npk >= need:
+                break
+    position = np.empty(n, dtype=np.int64)
+    for i in range(n):
+        position[order[i]] = i
+    out = np.empty(npk, dtype=np.int64)
+    for i in range(npk):
+        out[i] = position[picks[i]]
+    return order, out
 
 
 @njit(cache=True, error_model="numpy")
