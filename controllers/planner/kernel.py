@@ -258,15 +258,16 @@ def evaluate_steps(
         for k in range(nn):
             F[b, k] = psi[k] * thp * thp + hint[k]
         fmin = step.fmin if periodic else max(step.fmin, (cfg.dip_floor * thp) ** 2)
+        for k in range(nn):
+            G[b, col.thetadot_sq + k] = (F[b, k] - fmin) / (thd_ref * thd_ref)
+        if screen > -math.inf and _below(G[b], col.thetadot_sq, nn, screen):
+            _screened(out, b)  # (before the step time: most screened rows stop here)
+            continue
         rd.grid_step_time(F[b], qint, half, lo, thd, tcum)
         T = tcum[nn - 1]
         G[b, col.duration] = (T - cfg.duration_min) / cfg.duration_min
         G[b, col.duration + 1] = (cfg.duration_max - T) / cfg.duration_min
-        for k in range(nn):
-            G[b, col.thetadot_sq + k] = (F[b, k] - fmin) / (thd_ref * thd_ref)
-        if screen > -math.inf and (
-            _below(G[b], col.duration, 2, screen) or _below(G[b], col.thetadot_sq, nn, screen)
-        ):
+        if screen > -math.inf and _below(G[b], col.duration, 2, screen):
             _screened(out, b)
             continue
         # nominal input and stance-foot reaction along the motion
