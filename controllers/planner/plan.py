@@ -88,7 +88,7 @@ class StepPlan:
         psi, gam, f, time, u, delta, slope = _step_profile(
             P, ph, th, dph, ddph, float(thetadot_plus) ** 2, rd.cumulative_integral_matrix(grid)
         )
-        if np.any(~(f > 0)):
+        if np.any(~(f > 0)):  # (rd.step_time's check and message)
             raise ValueError("step_time: theta_dot^2 must be > 0 on the whole grid (one grid)")
         self.theta_grid = th
         self.psi_grid, self.gam_grid = psi, gam
