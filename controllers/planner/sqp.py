@@ -392,6 +392,14 @@ def _jacobian(P, x0, T, z, f, c, k1, common, first, second, pair, X, cost, g, gr
     cost[1:] = cf
     g[0] = c
     g[1:] = gf
+    _mapped_quotients(X, cost, g, T, grad, A)
+
+
+@_jit
+def _mapped_quotients(X, cost, g, T, grad, A):
+    """:func:`fd_quotients` of the rows ``X`` (a point in ``x`` and its forward-difference
+    neighbours), mapped into ``z`` (``x = x0 + T z``): the gradient into ``grad``, the
+    constraints' Jacobian into ``A``."""
     gx, Axt = fd_quotients(X, cost, g)
     grad[:] = T.T @ gx
     A[:, :] = np.ascontiguousarray(Axt.T) @ T
@@ -454,29 +462,24 @@ def sqp_solve(
     given = start_cost.size == n + 1
     if budget < 1 + n and not given:
         return x0.copy(), 0, 2, 0
-    z = np.zeros(n)
-    grad = np.zeros(n)
-    X = np.empty((n + 1, n))
-    cost_fd = np.empty(n + 1)
     if given:
-        rows = 0
-        f = start_cost[0]
-        c = start_g[0].copy()
-        m = c.size
-        A = np.zeros((m, n))
-        g_fd = np.empty((n + 1, m))
-        _fd_points(x0, X)
-        gx, Axt = fd_quotients(X, start_cost, start_g)
-        grad[:] = T.T @ gx
-        A[:, :] = np.ascontiguousarray(Axt.T) @ T
+        cost, g, rows = start_cost, start_g, 0
     else:
         cost, g = _values(P, x0.reshape(1, n), k1, common, first, second, pair)
         rows = 1
-        f = cost[0]
-        c = g[0].copy()
-        m = c.size
-        A = np.zeros((m, n))
-        g_fd = np.empty((n + 1, m))
+    f = cost[0]
+    c = g[0].copy()
+    m = c.size
+    z = np.zeros(n)
+    grad = np.zeros(n)
+    A = np.zeros((m, n))
+    X = np.empty((n + 1, n))
+    cost_fd = np.empty(n + 1)
+    g_fd = np.empty((n + 1, m))
+    if given:  # the start's forward differences are among the rows given
+        _fd_points(x0, X)
+        _mapped_quotients(X, start_cost, start_g, T, grad, A)
+    else:
         _jacobian(P, x0, T, z, f, c, k1, common, first, second, pair, X, cost_fd, g_fd, grad, A)
         rows += n
     L = np.eye(n)
