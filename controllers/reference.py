@@ -82,6 +82,7 @@ ADDED_SETTINGS: dict[str, Any] = {
         "drop_edge_margin": 0.0,
         "beam_coarse": 0,
         "beam_full": 1,
+        "beam_far": 1,
         "compiled_sqp": 0,
     },
     "controller": {"posture_hold": False, "replan_beam_evaluations": 0},

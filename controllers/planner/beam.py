@@ -5,11 +5,12 @@ speed aimed one step ahead, so a sequence that must shed or gain speed several s
 rise or a drop is found only by luck. When it fails, the planner searches the horizon as a
 whole: every step of every kept branch tries its candidate footholds (the ranked list of
 :meth:`FootholdChains.ranked`, ``PlannerConfig.beam_footholds`` of them), and for each foothold
-a fixed set of shapes (the periodic gait's, quasi-random shapes near it and over the whole
-range of the coarse global search) evaluated in one compiled batch. Of each foothold's feasible
-shapes it keeps the cheapest and ``beam_speeds`` more spread over the post-impact speeds they
-lead to (the slowest, the fastest and evenly between), so that branches reaching the next rise
-slower or faster stay in the search. Of all children of a depth it keeps the ``beam_width``
+a fixed set of shapes (the periodic gait's, quasi-random shapes near it and, unless
+``PlannerConfig.beam_far`` is 0, over the whole range of the coarse global search) evaluated in
+one compiled batch. Of each foothold's feasible shapes it keeps the cheapest and
+``beam_speeds`` more spread over the post-impact speeds they lead to (the slowest, the fastest
+and evenly between), so that branches reaching the next rise slower or faster stay in the
+search. Of all children of a depth it keeps the ``beam_width``
 cheapest by the cost accumulated over the branch, at most two per foothold. The result is a
 plan of feasible (not optimised) steps over the whole horizon, or the deepest branch found.
 With ``PlannerConfig.beam_coarse`` a coarse pass comes first, with the first few shapes of
@@ -109,7 +110,7 @@ def _beam_pass(
     cfg, sm, l = search.config, search.model, search.params.l  # noqa: E741
     budget = search.evaluations.another(evaluations)  # (and the call's time bound)
     near, far = beam_shapes(cfg.order)
-    near, far = near[:shapes], far[:shapes]
+    near, far = near[:shapes], far[: shapes if cfg.beam_far else 0]
     rel = sm.ref.shape
     sm.wscale = 1.0
     beam = [_Branch(0.0, [], start, stance)]

@@ -174,6 +174,9 @@ class PlannerConfig:
         beam_full: with ``beam_coarse`` > 0, 1: where the coarse pass spans no horizon, the
             search runs again with all the shapes (the dataclass's default); 0: the coarse
             pass alone. Ignored with ``beam_coarse`` 0.
+        beam_far: 1: each beam step also tries the set of shapes over the global search's
+            whole range (the dataclass's default); 0: only the gait's shape and those near it
+            (half the evaluations a foothold).
         gauss_newton_scaling: 1: each SLSQP solve of a step (or a pair) runs in coordinates
             in which the Gauss-Newton model of its cost (a sum of squares) at the start point
             is the identity, SLSQP's first Hessian model, up to a floor on its flattest
@@ -251,6 +254,7 @@ class PlannerConfig:
     beam_evaluations: int = 40000
     beam_coarse: int = 0
     beam_full: int = 1
+    beam_far: int = 1
     gauss_newton_scaling: int = 0
     compiled_sqp: int = 0
 
@@ -284,6 +288,7 @@ class PlannerConfig:
             "beam_evaluations": 1,
             "beam_coarse": 0,
             "beam_full": 0,
+            "beam_far": 0,
             "gauss_newton_scaling": 0,
             "compiled_sqp": 0,
         }
@@ -324,7 +329,13 @@ class PlannerConfig:
             raise ValueError(
                 f"PlannerConfig.relaxed_margin = {self.relaxed_margin}; allowed: [0, 1]"
             )
-        for name in ("pairs_first", "beam_full", "gauss_newton_scaling", "compiled_sqp"):
+        for name in (
+            "pairs_first",
+            "beam_full",
+            "beam_far",
+            "gauss_newton_scaling",
+            "compiled_sqp",
+        ):
             if getattr(self, name) > 1:
                 raise ValueError(f"PlannerConfig.{name} = {getattr(self, name)}; allowed: 0 or 1")
         if self.beam_coarse > BEAM_SHAPES:

@@ -162,6 +162,20 @@ def test_with_beam_full_0_the_coarse_pass_is_the_whole_beam(rise_after_drops):
         assert np.array_equal(s.coeffs, t.coeffs) and s.foothold == t.foothold
 
 
+def test_with_beam_far_0_a_beam_step_tries_the_gaits_shape_and_those_near_it():
+    """``beam_far: 0``: each foothold a beam step tries costs the gait's shape and the near set
+    (1 + 8 rows in the coarse pass, against 1 + 2 x 8 with the far set), and on a course whose
+    plan the coarse pass finds from near shapes the plan is the same."""
+    course = BlocksBeforeARise()
+    near = plan_blocks(course, beam_full=0, beam_far=0)
+    both = plan_blocks(course, beam_full=0)
+    assert near.beam and both.beam and len(near) == len(both) == HORIZON
+    assert near.beam_evaluations % 9 == 0 and both.beam_evaluations % 17 == 0
+    assert near.beam_evaluations < both.beam_evaluations
+    for s, t in zip(near, both):
+        assert np.array_equal(s.coeffs, t.coeffs) and s.foothold == t.foothold
+
+
 def test_terrain_no_sequence_crosses_still_raises_naming_the_step(planners):
     gait = planners["paper"].periodic_gait()
     pl = GaitPlanner("paper", {"beam_width": 8, "beam_evaluations": 5000})
@@ -181,6 +195,8 @@ def test_terrain_no_sequence_crosses_still_raises_naming_the_step(planners):
         {"beam_coarse": 33},
         {"beam_full": -1},
         {"beam_full": 2},
+        {"beam_far": -1},
+        {"beam_far": 2},
     ],
 )
 def test_beam_settings_are_validated(bad):
