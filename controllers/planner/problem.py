@@ -43,7 +43,7 @@ from .footholds import TerrainMap
 from .kernel import StepGrids, StepGround, StepScalars, StepSettings
 from .plan import PeriodicGait
 from .slsqp import minimize_slsqp
-from .sqp import FD_STEP, NO_START, NO_START_G, fd_quotients, sqp_solve
+from .sqp import NO_START, NO_START_G, fd_points, fd_quotients, sqp_solve
 
 __all__ = [
     "CONSTRAINT_GROUPS",
@@ -651,9 +651,8 @@ class BatchProblem:
         self._points: dict[bytes, tuple[np.ndarray, np.ndarray, np.ndarray]] = {}
         # points accounted in the budget but not evaluated yet (forward differences put off)
         self._charged: set[bytes] = set()
-        # the costs and constraints of the last points :meth:`_residual_rows` evaluated, and
-        # of the last :meth:`scaling`'s (its point as bytes first), for the compiled solve
-        self._start_rows: tuple = ()
+        # the last :meth:`scaling`'s point (as bytes) with the costs and constraints there and
+        # at its forward-difference points: the compiled solve's first Jacobian
         self._start: tuple = ()
 
     def _fill(self, X: np.ndarray, payload: bool = False) -> tuple[np.ndarray, np.ndarray] | None:
@@ -768,8 +767,8 @@ class BatchProblem:
         x0 = np.ascontiguousarray(x0, dtype=np.float64)
         X = _fd_points(x0)
         if self.residual_values is not None:
-            R = self._residual_rows(X)
-            self._start = (x0.tobytes(), *self._start_rows)
+            cost, g, R = self._residual_rows(X)
+            self._start = (x0.tobytes(), cost, g)
         else:
             rows = self.evaluate_many(X, payload=True)
             R = np.stack([self.residuals(p)[r] for _, _, p, r in rows])
@@ -783,16 +782,16 @@ class BatchProblem:
             return None
         return (V / np.sqrt(np.maximum(w, _SCALING_FLOOR * w[-1]))) @ V.T
 
-    def _residual_rows(self, X: np.ndarray) -> np.ndarray:
-        """The cost's terms at the rows of ``X`` from ``residual_values``, its rows not
-        evaluated yet accounted and cached as :meth:`_fill` does (without their payload)."""
+    def _residual_rows(self, X: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """``residual_values`` at the rows of ``X``: their costs, constraints and the cost's
+        terms, the rows not evaluated yet accounted and cached as :meth:`_fill` does (without
+        their payload)."""
         keys = [x.tobytes() for x in X]
         todo = self._accounted(keys)
         cost, g, R = self.residual_values(X)
         for i in todo:
             self.cache[keys[i]] = (float(cost[i]), g[i], None, i)
-        self._start_rows = (cost, g)
-        return R
+        return cost, g, R
 
     def minimize(
         self,
@@ -896,15 +895,8 @@ _UNLIMITED = 2**62  # rows of a compiled solve without a budget
 
 
 def _fd_points(x: np.ndarray) -> np.ndarray:
-    """``x`` and its ``k`` forward-difference neighbours (rows)."""
-    k = x.size
-    steps = FD_STEPS.get(k)
-    if steps is None:
-        steps = FD_STEPS[k] = FD_STEP * np.eye(k)
-    X = np.empty((k + 1, k))
-    X[:] = x
-    X[1:] += steps
+    """``x`` and its ``k`` forward-difference neighbours (rows), as the compiled solve takes
+    them (:func:`.sqp.fd_points`)."""
+    X = np.empty((x.size + 1, x.size))
+    fd_points(np.ascontiguousarray(x, dtype=np.float64), X)
     return X
-
-
-FD_STEPS: dict[int, np.ndarray] = {}  # the forward-difference steps by dimension

@@ -36,7 +36,7 @@ from numba import njit
 
 from . import kernel
 
-__all__ = ["FD_STEP", "SQP_STATUS", "fd_quotients", "sqp_solve"]
+__all__ = ["FD_STEP", "SQP_STATUS", "fd_points", "fd_quotients", "sqp_solve"]
 
 _jit = njit(cache=True, error_model="numpy")
 
@@ -386,7 +386,7 @@ def _jacobian(P, x0, T, z, f, c, k1, common, first, second, pair, X, cost, g, gr
     forward differences in the free coefficients ``x = x0 + T z`` (``n`` kernel rows;
     :func:`fd_quotients`, as :class:`.problem.BatchProblem` takes them), mapped through
     ``T``. ``X``, ``cost``, ``g``: work arrays of ``n + 1`` rows."""
-    _fd_points(x0 + T @ z, X)
+    fd_points(x0 + T @ z, X)
     cf, gf = _values(P, X[1:], k1, common, first, second, pair)
     cost[0] = f
     cost[1:] = cf
@@ -406,7 +406,7 @@ def _mapped_quotients(X, cost, g, T, grad, A):
 
 
 @_jit
-def _fd_points(x, X):
+def fd_points(x, X):
     """``x`` and its forward-difference neighbours, one coordinate each, into the rows of
     ``X`` (``(k + 1, k)``)."""
     for i in range(X.shape[0]):
@@ -477,7 +477,7 @@ def sqp_solve(
     cost_fd = np.empty(n + 1)
     g_fd = np.empty((n + 1, m))
     if given:  # the start's forward differences are among the rows given
-        _fd_points(x0, X)
+        fd_points(x0, X)
         _mapped_quotients(X, start_cost, start_g, T, grad, A)
     else:
         _jacobian(P, x0, T, z, f, c, k1, common, first, second, pair, X, cost_fd, g_fd, grad, A)
