@@ -40,6 +40,11 @@ _MEMO_TERRAINS = 4  # terrains whose chain lengths are kept
 _UNRANKED = 2**62  # sorts a candidate not ranked after every ranked one
 
 
+def polyline_key(xs: np.ndarray, ys: np.ndarray) -> bytes:
+    """A terrain polyline ``xs, ys`` [m] as bytes (:attr:`TerrainMap.key`)."""
+    return xs.tobytes() + ys.tobytes()
+
+
 class TerrainMap:
     """Terrain as the planner sees it: vectorised heights and the features to keep away from.
 
@@ -97,7 +102,7 @@ class TerrainMap:
     @functools.cached_property
     def key(self) -> bytes:
         """The map's polyline as bytes: equal keys, equal terrain (the planner's memo key)."""
-        return self.xs.tobytes() + self.ys.tobytes()
+        return polyline_key(self.xs, self.ys)
 
     def height(self, x: np.ndarray | float) -> np.ndarray | float:
         """Ground height [m] at ``x`` [m] (the upper height on a vertical face)."""

@@ -16,7 +16,7 @@ from envs.physics.terrain import Terrain
 
 from ..numerics import one_blas_thread
 from .config import PlannerConfig, PlanningError
-from .footholds import FootholdChains, TerrainMap
+from .footholds import FootholdChains, TerrainMap, polyline_key
 from .least_violation import least_violation_steps
 from .periodic import GaitCache, solve_periodic_gait
 from .plan import PeriodicGait, Plan
@@ -78,7 +78,7 @@ class GaitPlanner:
         passes its map at every footstep, and a :class:`Terrain` is its polyline alone."""
         if not isinstance(terrain, Terrain):
             return TerrainMap.coerce(terrain)
-        key = terrain.xs.tobytes() + terrain.ys.tobytes()
+        key = polyline_key(terrain.xs, terrain.ys)
         tmap = self._maps.get(key)
         if tmap is None:
             if len(self._maps) >= _MAPS_KEPT:
