@@ -128,6 +128,7 @@ class SensorStateEstimator:
         self.dt = float(u.dt)
         self.u_max = float(u.u_max)
         self.layout = u.sensor_layout
+        self._obs_shape, self._scan = (self.layout.size,), self.layout.scan
         if initial_velocity is None:
             init = getattr(getattr(u, "settings", None), "initial_state", None)
             initial_velocity = tuple(init.qd) if init is not None else (0.0, 0.0)
@@ -226,12 +227,13 @@ class SensorStateEstimator:
             ValueError: the observation has the wrong size or is not finite.
         """
         o = np.asarray(obs, dtype=np.float64)
-        if o.shape != (self.layout.size,) or not np.isfinite(o).all():
-            raise ValueError(f"observation must be {self.layout.size} finite numbers")
         lay = self.layout
-        leg = stance_from_contacts(o[lay.contact_a], o[lay.contact_b], self.stance_leg)
-        self.scan = o[lay.scan].copy()
-        return np.array(encoders_to_q(o[lay.hip], o[lay.leg_a], leg)), leg
+        v = o.tolist() if o.shape == self._obs_shape else None
+        if v is None or not all(map(math.isfinite, v)):
+            raise ValueError(f"observation must be {lay.size} finite numbers")
+        leg = stance_from_contacts(v[lay.contact_a], v[lay.contact_b], self.stance_leg)
+        self.scan = o[self._scan].copy()
+        return np.array(encoders_to_q(v[lay.hip], v[lay.leg_a], leg)), leg
 
     def update(self, q: np.ndarray, leg: int, u: float) -> str:
         """Take the decoded measurement of a new tick; ``u`` [input units] is the input applied
@@ -269,7 +271,7 @@ class SensorStateEstimator:
             self.observer.update(q, u)
             self._scan_sum += self.scan
             self._scan_n += 1
-        if not np.isfinite(self.observer.x).all():
+        if not all(map(math.isfinite, self.observer.x.tolist())):
             raise FloatingPointError("non-finite observer estimate")
         return event
 

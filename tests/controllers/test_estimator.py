@@ -52,6 +52,16 @@ def test_decode_and_bad_input():
         est.decode(np.full_like(obs, np.nan))
     with pytest.raises(ValueError, match="finite numbers"):
         est.decode(obs[:3])
+    one_inf = np.array(obs, dtype=np.float64)
+    one_inf[-1] = -np.inf
+    for bad in (one_inf, np.stack([obs, obs]), list(obs[:-1]) + [float("nan")]):
+        with pytest.raises(ValueError, match="finite numbers"):
+            est.decode(bad)
+    # the scan is the estimator's own copy, not a view of the caller's observation
+    mine = np.array(obs, dtype=np.float64)
+    est.decode(mine)
+    mine[:] = 0.0
+    assert np.array_equal(est.scan, np.asarray(obs, dtype=np.float64)[est.layout.scan])
     with pytest.raises(ValueError, match="observation='sensors'"):
         SensorStateEstimator(gym.make("roughwalk/CompassGaitFlat-v0", observation="state"))
     assert est.update(q, leg, 0.0) == "start"
