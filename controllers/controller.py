@@ -192,9 +192,10 @@ class ControllerConfig:
             :attr:`PlannerConfig.beam_evaluations`), so a replanning spends at most
             ``replan_evaluations`` plus this (plus a batch a beam pass) with the least-violating
             steps' own budget. 0 (the class default; the paper robot's preset,
-            ``configs/controller/paper.yaml``, has 40,000): each call's beam search has the
-            planner's whole budget (a footstep whose full problem and deeper relaxation both
-            run one spends it twice).
+            ``configs/controller/paper.yaml``, has 20,000, with the beam's near shapes alone,
+            and had 40,000 before them): each call's beam search has the planner's whole
+            budget (a footstep whose full problem and deeper relaxation both run one spends it
+            twice).
         tube_energy: replan within a step (replan mode) when the estimated state leaves the
             plan's tube: ``|theta_dot^2 - theta_dot*^2(theta)|`` above this fraction of
             ``theta_dot*^2(theta)`` (a push, a stall in the making, a plan made from a poor

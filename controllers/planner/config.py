@@ -175,8 +175,9 @@ class PlannerConfig:
             search runs again with all the shapes (the dataclass's default); 0: the coarse
             pass alone. Ignored with ``beam_coarse`` 0.
         beam_far: 1: each beam step also tries the set of shapes over the global search's
-            whole range (the dataclass's default); 0: only the gait's shape and those near it
-            (half the evaluations a foothold).
+            whole range (the dataclass's and the classic walker's default); 0: only the gait's
+            shape and those near it (half the evaluations a foothold; the paper robot's preset,
+            held out with a beam budget of 20,000 a replanning; before, 1).
         gauss_newton_scaling: 1: each SLSQP solve of a step (or a pair) runs in coordinates
             in which the Gauss-Newton model of its cost (a sum of squares) at the start point
             is the identity, SLSQP's first Hessian model, up to a floor on its flattest

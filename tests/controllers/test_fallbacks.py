@@ -334,13 +334,20 @@ def test_a_replanning_shares_its_beam_budget_across_its_planner_calls(
 
 
 def test_one_beam_budget_per_replanning_is_the_paper_robots_default():
-    """The paper robot's preset (configs/controller/paper.yaml) caps a replanning's beam
-    searches at 40,000 step evaluations together; the class default, the robots without a
-    preset and ``replan_beam_evaluations=0`` keep each call's own budget (the earlier records'
-    setting, which their specs, agent configs and manifests pin)."""
-    assert ControllerConfig.for_robot("paper").replan_beam_evaluations == 40000
+    """The paper robot's presets cap a replanning's beam searches at 20,000 step evaluations
+    together (configs/controller/paper.yaml), each beam step trying the near shapes alone
+    (configs/planner/paper.yaml: beam_far 0); the class defaults and the robots without a preset
+    keep each call's own budget and the far shapes. The earlier records' settings, which their
+    specs, agent configs and manifests pin, give them again: ``replan_beam_evaluations=0`` (or
+    40,000, the default before the near shapes) with ``beam_far=1``."""
+    assert ControllerConfig.for_robot("paper").replan_beam_evaluations == 20000
     assert ControllerConfig().replan_beam_evaluations == 0
     assert ControllerConfig.for_robot("classic").replan_beam_evaluations == 0
-    off = ControllerConfig.for_robot("paper", replan_beam_evaluations=0)
-    assert off.replan_beam_evaluations == 0
-    assert TransverseController("paper", "flat").config.replan_beam_evaluations == 40000
+    for pinned in (0, 40000):
+        cfg = ControllerConfig.for_robot("paper", replan_beam_evaluations=pinned)
+        assert cfg.replan_beam_evaluations == pinned
+    ctrl = TransverseController("paper", "flat")
+    assert ctrl.config.replan_beam_evaluations == 20000 and ctrl.planner.config.beam_far == 0
+    ctrl = TransverseController("paper", "flat", planner={"beam_far": 1})
+    assert ctrl.planner.config.beam_far == 1
+    assert TransverseController("classic", "flat").planner.config.beam_far == 1

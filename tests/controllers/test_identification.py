@@ -257,10 +257,12 @@ def walk(env, policy, seed):
 def test_identification_walks_stairs_courses_the_nominal_model_fails_on():
     """Every parameter 10 % off (random sign), 8 validation courses (seeds from 1,000,000):
     after each of the first six footsteps (the default) the policy fits the swing dynamics and
-    switches model where the data reject the one in use. It walks at least 3 more courses than
-    the nominal model, on each it walks the fits switched model, and the identified leg length
-    (from the localisation's drift) has at most half the nominal one's error in the median; a
-    reset goes back to the nominal robot."""
+    switches model where the data reject the one in use. It walks every course the nominal
+    model walks and at least 2 more (the nominal model walks 6 with the paper robot's defaults,
+    5 with the beam's far shapes on 40,000 a replanning, the defaults before them), on each it
+    walks the fits switched model, and the identified leg length (from the localisation's
+    drift) has at most half the nominal one's error in the median; a reset goes back to the
+    nominal robot."""
     env = gym.make("roughwalk/CompassGaitStairs-v0", robot_error={"all": 0.1, "draw": "sign"})
     plain = make_reference_policy(env, identify=0)
     policy = make_reference_policy(env)
@@ -268,10 +270,12 @@ def test_identification_walks_stairs_courses_the_nominal_model_fails_on():
     leg_errors = []
     for seed in range(1_000_000, 1_000_008):
         info, _ = walk(env, plain, seed)
-        walked["plain"] += info["failure"] is None
+        plain_walked = info["failure"] is None
+        walked["plain"] += plain_walked
         true_l = env.reset(seed=seed)[1]["robot"]["l"]
         info, _ = walk(env, policy, seed)
         if info["failure"] is not None:
+            assert not plain_walked, (seed, info["failure"])
             continue
         walked["identified"] += 1
         fits = policy.diagnostics["identified"]
@@ -283,7 +287,7 @@ def test_identification_walks_stairs_courses_the_nominal_model_fails_on():
         policy.reset()
         assert policy.robot is policy.nominal_robot
         assert policy.estimator.robot is policy.controller.robot is policy.nominal_robot
-    assert walked["identified"] >= walked["plain"] + 3, walked
+    assert walked["identified"] >= walked["plain"] + 2, walked
     assert np.median(leg_errors) < 0.5, leg_errors
 
 

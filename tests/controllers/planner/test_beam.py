@@ -163,12 +163,15 @@ def test_with_beam_full_0_the_coarse_pass_is_the_whole_beam(rise_after_drops):
 
 
 def test_with_beam_far_0_a_beam_step_tries_the_gaits_shape_and_those_near_it():
-    """``beam_far: 0``: each foothold a beam step tries costs the gait's shape and the near set
-    (1 + 8 rows in the coarse pass, against 1 + 2 x 8 with the far set), and on a course whose
-    plan the coarse pass finds from near shapes the plan is the same."""
+    """``beam_far: 0`` (the paper robot's default; the dataclass's and the classic walker's is
+    1): each foothold a beam step tries costs the gait's shape and the near set (1 + 8 rows in
+    the coarse pass, against 1 + 2 x 8 with the far set), and on a course whose plan the coarse
+    pass finds from near shapes the plan is the same."""
+    assert GaitPlanner("paper").config.beam_far == 0
+    assert PlannerConfig().beam_far == 1 and GaitPlanner("classic").config.beam_far == 1
     course = BlocksBeforeARise()
-    near = plan_blocks(course, beam_full=0, beam_far=0)
-    both = plan_blocks(course, beam_full=0)
+    near = plan_blocks(course, beam_full=0)
+    both = plan_blocks(course, beam_full=0, beam_far=1)
     assert near.beam and both.beam and len(near) == len(both) == HORIZON
     assert near.beam_evaluations % 9 == 0 and both.beam_evaluations % 17 == 0
     assert near.beam_evaluations < both.beam_evaluations
