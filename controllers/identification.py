@@ -33,11 +33,15 @@ turns it off. The solver is an iteratively reweighted Levenberg-Marquardt on the
 segment's residuals depend on the coefficients and its own initial state only, so each iteration
 eliminates the segments' 4 x 4 blocks (a Schur complement) and costs in proportion to the number of
 segments, where a dense solver's cost grows with its cube; the coefficients' covariance is the
-inverse of the same Schur complement at the solution. Equation-error fits (regressing on
-differentiated encoder readings) are biased here: the unactuated row of the dynamics is homogeneous
-in ``theta``, and noise in the differentiated angles pulls ``p3`` and ``p4 + p5`` to zero together.
-Output error puts the noise where it is, on the measured angles. A Gaussian prior centred on the
-nominal coefficients (:data:`PRIOR`) keeps the directions the data barely see (the absolute level of
+inverse of the same Schur complement at the solution. The Jacobian is exact for the discretised
+model: each segment is simulated once with the sensitivities of its state to its initial state and
+the coefficients carried through every RK4 step (forward differences took a simulation per
+unknown, and a perturbation that flipped the sign of the hip rate at an RK4 stage put the Coulomb
+friction's jump into a column). Equation-error fits (regressing on differentiated encoder
+readings) are biased here: the unactuated row of the dynamics is homogeneous in ``theta``, and
+noise in the differentiated angles pulls ``p3`` and ``p4 + p5`` to zero together. Output error
+puts the noise where it is, on the measured angles. A Gaussian prior centred on the nominal
+coefficients (:data:`PRIOR`) keeps the directions the data barely see (the absolute level of
 ``p3`` and ``p5`` when only their ratio is excited) near the nominal robot.
 
 :func:`robot_from_coefficients` turns the identified coefficients into the nearest robot
@@ -105,6 +109,8 @@ SD_FLOOR = 0.01
 #: 99th percentile of chi-square with 6 degrees of freedom (scipy.stats.chi2.ppf(0.99, 6))
 CHI2_99 = 16.812
 _INIT_SCALE = (1e-3, 1e-3, 0.1, 0.1)  # typical size of the initial-state corrections
+#: a segment's state sensitivities: by its initial state, then by the coefficients
+_SENSITIVITIES = 4 + len(COEFFICIENTS)
 _EPS = float(np.finfo(np.float64).eps)
 
 
@@ -138,58 +144,162 @@ def _coefficients(free, free_index, ratio):  # pragma: no cover - compiled
     return z
 
 
+# inlined where numba compiles the caller, so that the sines and cosines are shared with the
+# caller's model.accelerations at the same state (a quarter of the Jacobian's time otherwise)
+@njit(cache=True, inline="always")
+def _acceleration_partials(P, q1, q2, q1d, q2d, q1dd, q2dd, out):  # pragma: no cover - compiled
+    """Partial derivatives of the swing accelerations ``(q1dd, q2dd)`` (those of
+    :func:`envs.physics.model.accelerations` at the state) into ``out`` (2, 11): by the state
+    ``(q1, q2, q1d, q2d)`` and by the coefficients ``(p1, p2, p3, p4, p5, Fc, Fv)``. From the
+    dynamics ``R = M qdd + C qd + G + tau_F - B u = 0``: ``d qdd = -M^-1 dR`` (the Coulomb
+    term's sign counts as constant)."""
+    p2, p4, p5 = P[P2], P[P4], P[P5]
+    m11, m12, m22 = model.mass_matrix(P, q1)
+    c, s = math.cos(q1), math.sin(q1)
+    sd, cd = math.sin(q1 - q2), math.cos(q1 - q2)
+    s2, c2 = math.sin(q2), math.cos(q2)
+    v1 = 2.0 * q1d * q2d - q1d * q1d  # the Coriolis row 2's rate factor
+    # dR / d(state, coefficients), rows 1 and 2
+    r1 = out[0]
+    r2 = out[1]
+    r1[0] = -s * p2 * q2dd - c * p2 * q2d * q2d + cd * p4
+    r2[0] = s * p2 * (2.0 * q2dd - q1dd) + c * p2 * v1 - cd * p4
+    r1[1] = -cd * p4
+    r2[1] = cd * p4 - c2 * (p5 + p4)
+    r1[2] = P[PFV]
+    r2[2] = 2.0 * s * p2 * (q2d - q1d)
+    r1[3] = -2.0 * s * p2 * q2d
+    r2[3] = 2.0 * s * p2 * q1d
+    r1[4] = q1dd - q2dd
+    r2[4] = 2.0 * q2dd - q1dd
+    r1[5] = c * q2dd - s * q2d * q2d
+    r2[5] = c * (q1dd - 2.0 * q2dd) + s * v1
+    r1[6] = 0.0
+    r2[6] = q2dd
+    r1[7] = sd
+    r2[7] = -sd - s2
+    r1[8] = 0.0
+    r2[8] = -s2
+    r1[9] = np.sign(q1d)
+    r2[9] = 0.0
+    r1[10] = q1d
+    r2[10] = 0.0
+    det = m11 * m22 - m12 * m12
+    for j in range(_SENSITIVITIES):
+        a, b = r1[j], r2[j]
+        r1[j] = (m12 * b - m22 * a) / det
+        r2[j] = (m12 * a - m11 * b) / det
+
+
 @njit(cache=True)
-def _residuals(
-    p, P, index, nominal, free_index, ratio, prior, Q, U, bounds, dt, nsub, sig
-):  # pragma: no cover - compiled
-    """The fit's residuals at ``p`` (fitted coefficients, then each segment's initial-state
-    correction): the prior's, then each segment's simulated minus measured angles [standard
-    deviations]; the segments are the rows ``bounds[s]:bounds[s + 1]`` of ``Q`` and ``U``."""
-    nf = free_index.size
-    P = P.copy()
-    P[index] = nominal * (1.0 + _coefficients(p[:nf], free_index, ratio))
-    out = np.empty(nf + 2 * Q.shape[0])
-    out[:nf] = p[:nf] / prior
-    x0 = np.empty(4)
-    for s in range(bounds.size - 1):
-        a, b = bounds[s], bounds[s + 1]
-        d = p[nf + 4 * s : nf + 4 * s + 4]
-        x0[0] = Q[a, 0] + d[0]
-        x0[1] = Q[a, 1] + d[1]
-        x0[2] = d[2]
-        x0[3] = d[3]
-        sim = simulate_swing(P, x0, U[a:b], dt, nsub)
-        for k in range(b - a):
-            out[nf + 2 * (a + k)] = (sim[k, 0] - Q[a + k, 0]) / sig
-            out[nf + 2 * (a + k) + 1] = (sim[k, 1] - Q[a + k, 1]) / sig
-    return out
+def _slope(D, j, x0, x1, x2, x3):  # pragma: no cover - compiled
+    """The slope of a state's sensitivity ``(x0, x1, x2, x3)`` by unknown ``j`` at an RK4
+    stage whose :func:`_acceleration_partials` are ``D`` (2, 11): unknowns 0-3 are the
+    initial state's (the homogeneous equation), 4-10 the coefficients (forced by ``D``'s
+    column)."""
+    f0 = D[0, j] if j >= 4 else 0.0
+    f1 = D[1, j] if j >= 4 else 0.0
+    return (
+        x2,
+        x3,
+        D[0, 0] * x0 + D[0, 1] * x1 + D[0, 2] * x2 + D[0, 3] * x3 + f0,
+        D[1, 0] * x0 + D[1, 1] * x1 + D[1, 2] * x2 + D[1, 3] * x3 + f1,
+    )
+
+
+@njit(cache=True)
+def _rk4_tangent(P, x, S, u, h, D):  # pragma: no cover - compiled
+    """One RK4 step of :func:`envs.physics.model.swing_rk4` (the same arithmetic: the same
+    state) from ``x`` (4,) under the input ``u``, and the step's exact derivative applied to
+    the state's sensitivities ``S`` (11, 4), row ``j`` by unknown ``j`` of :func:`_slope`;
+    both in place. ``D`` (4, 2, 11): work space."""
+    hh = 0.5 * h
+    h6 = h / 6.0
+    q1, q2, q1d, q2d = x[0], x[1], x[2], x[3]
+    q1dd, q2dd = model.accelerations(P, q1, q2, q1d, q2d, u)
+    _acceleration_partials(P, q1, q2, q1d, q2d, q1dd, q2dd, D[0])
+    w1_2, w2_2 = q1d + hh * q1dd, q2d + hh * q2dd
+    a2, b2 = model.accelerations(P, q1 + hh * q1d, q2 + hh * q2d, w1_2, w2_2, u)
+    _acceleration_partials(P, q1 + hh * q1d, q2 + hh * q2d, w1_2, w2_2, a2, b2, D[1])
+    w1_3, w2_3 = q1d + hh * a2, q2d + hh * b2
+    a3, b3 = model.accelerations(P, q1 + hh * w1_2, q2 + hh * w2_2, w1_3, w2_3, u)
+    _acceleration_partials(P, q1 + hh * w1_2, q2 + hh * w2_2, w1_3, w2_3, a3, b3, D[2])
+    w1_4, w2_4 = q1d + h * a3, q2d + h * b3
+    a4, b4 = model.accelerations(P, q1 + h * w1_3, q2 + h * w2_3, w1_4, w2_4, u)
+    _acceleration_partials(P, q1 + h * w1_3, q2 + h * w2_3, w1_4, w2_4, a4, b4, D[3])
+    x[0] = q1 + h6 * (q1d + 2.0 * w1_2 + 2.0 * w1_3 + w1_4)
+    x[1] = q2 + h6 * (q2d + 2.0 * w2_2 + 2.0 * w2_3 + w2_4)
+    x[2] = q1d + h6 * (q1dd + 2.0 * a2 + 2.0 * a3 + a4)
+    x[3] = q2d + h6 * (q2dd + 2.0 * b2 + 2.0 * b3 + b4)
+    for j in range(S.shape[0]):
+        s0, s1, s2, s3 = S[j, 0], S[j, 1], S[j, 2], S[j, 3]
+        k0, k1, k2, k3 = _slope(D[0], j, s0, s1, s2, s3)
+        l0, l1, l2, l3 = _slope(D[1], j, s0 + hh * k0, s1 + hh * k1, s2 + hh * k2, s3 + hh * k3)
+        m0, m1, m2, m3 = _slope(D[2], j, s0 + hh * l0, s1 + hh * l1, s2 + hh * l2, s3 + hh * l3)
+        n0, n1, n2, n3 = _slope(D[3], j, s0 + h * m0, s1 + h * m1, s2 + h * m2, s3 + h * m3)
+        S[j, 0] = s0 + h6 * (k0 + 2.0 * l0 + 2.0 * m0 + n0)
+        S[j, 1] = s1 + h6 * (k1 + 2.0 * l1 + 2.0 * m1 + n1)
+        S[j, 2] = s2 + h6 * (k2 + 2.0 * l2 + 2.0 * m2 + n2)
+        S[j, 3] = s3 + h6 * (k3 + 2.0 * l3 + 2.0 * m3 + n3)
 
 
 @njit(cache=True)
 def _jacobian(
     p, P, index, nominal, free_index, ratio, prior, Q, U, bounds, dt, nsub, sig
 ):  # pragma: no cover - compiled
-    """The residuals ``r`` at ``p`` and their forward-difference Jacobian in two blocks: ``Jt``
-    by the fitted coefficients ``(m, nf)`` and ``Jd`` by the initial-state corrections ``(m,
-    4)``, row ``i`` of ``Jd`` by those of the segment row ``i`` belongs to (zero on the
-    prior's rows). A segment's residuals depend on the coefficients and its own initial state
-    only, so the k-th initial component of every segment moves at once."""
-    args = (P, index, nominal, free_index, ratio, prior, Q, U, bounds, dt, nsub, sig)
+    """The fit's residuals ``r`` at ``p`` (fitted coefficients, then each segment's
+    initial-state correction): the prior's, then each segment's simulated minus measured angles
+    [standard deviations], the segments being the rows ``bounds[s]:bounds[s + 1]`` of ``Q`` and
+    ``U``; and their Jacobian in two blocks: ``Jt`` by the fitted coefficients ``(m, nf)`` and
+    ``Jd`` by the initial-state corrections ``(m, 4)``, row ``i`` of ``Jd`` by those of the
+    segment row ``i`` belongs to (zero on the prior's rows). The Jacobian is exact for the
+    discretised model: every segment's simulation carries the sensitivities of its state
+    through each RK4 step (:func:`_rk4_tangent`)."""
     nf = free_index.size
-    r0 = _residuals(p, *args)
-    Jt = np.empty((r0.size, nf))
-    Jd = np.zeros((r0.size, 4))
+    # the model's coefficients by the fitted ones (_coefficients is affine)
+    G = np.empty((index.size, nf))
+    z0 = _coefficients(np.zeros(nf), free_index, ratio)
     for j in range(nf):
-        h = 1e-7 * max(1.0, abs(p[j]))
-        e = p.copy()
-        e[j] += h
-        Jt[:, j] = (_residuals(e, *args) - r0) / h
-    for k in range(4):
-        h = 1e-7 * max(1.0, np.max(np.abs(p[nf + k :: 4])))
-        e = p.copy()
-        e[nf + k :: 4] += h
-        Jd[nf:, k] = (_residuals(e, *args)[nf:] - r0[nf:]) / h
-    return r0, Jt, Jd
+        e = np.zeros(nf)
+        e[j] = 1.0
+        G[:, j] = nominal * (_coefficients(e, free_index, ratio) - z0)
+    P = P.copy()
+    P[index] = nominal * (1.0 + _coefficients(p[:nf], free_index, ratio))
+    r = np.empty(nf + 2 * Q.shape[0])
+    Jt = np.zeros((r.size, nf))
+    Jd = np.zeros((r.size, 4))
+    r[:nf] = p[:nf] / prior
+    for j in range(nf):
+        Jt[j, j] = 1.0 / prior[j]
+    x, S, D = np.empty(4), np.empty((_SENSITIVITIES, 4)), np.empty((4, 2, _SENSITIVITIES))
+    h = dt / nsub
+    for s in range(bounds.size - 1):
+        a, b = bounds[s], bounds[s + 1]
+        d = p[nf + 4 * s : nf + 4 * s + 4]
+        x[0] = Q[a, 0] + d[0]
+        x[1] = Q[a, 1] + d[1]
+        x[2] = d[2]
+        x[3] = d[3]
+        S[:] = 0.0
+        for i in range(4):
+            S[i, i] = 1.0
+        for k in range(b - a):
+            row = nf + 2 * (a + k)
+            r[row] = (x[0] - Q[a + k, 0]) / sig
+            r[row + 1] = (x[1] - Q[a + k, 1]) / sig
+            for i in range(2):
+                for j in range(4):
+                    Jd[row + i, j] = S[j, i] / sig
+                for j in range(nf):
+                    v = 0.0
+                    for c in range(index.size):
+                        v += S[4 + c, i] * G[c, j]
+                    Jt[row + i, j] = v / sig
+            if k == b - a - 1:
+                break
+            for _ in range(nsub):
+                _rk4_tangent(P, x, S, U[a + k], h, D)
+    return r, Jt, Jd
 
 
 @njit(cache=True)
@@ -235,26 +345,27 @@ def _normal_equations(r, Jt, Jd, w_grad, w_hess, bounds):  # pragma: no cover - 
 
 def _fit_huber(
     p0: np.ndarray, scale: np.ndarray, args: tuple, max_iter: int = 100, tol: float = 1e-8
-) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-    """Levenberg-Marquardt on the Huber cost of :func:`_residuals` (scale ``ROBUST_SCALE``)
-    from ``p0``, ``scale`` the typical sizes of the unknowns (the convergence tests', and the
-    floor of the damping, which is Marquardt's: the Hessian's diagonal). Stops when the cost
-    falls by less than ``tol`` relatively, the step is below ``tol`` relative to the point, or
-    the scaled gradient below ``tol``. Returns the point and the undamped blocks ``A, B, C`` of
-    its Gauss-Newton Hessian (:func:`_normal_equations`)."""
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """Levenberg-Marquardt on the Huber cost of the residuals of :func:`_jacobian` (scale
+    ``ROBUST_SCALE``) from ``p0``, ``scale`` the typical sizes of the unknowns (the convergence
+    tests', and the floor of the damping, which is Marquardt's: the Hessian's diagonal). Stops
+    when the cost falls by less than ``tol`` relatively, the step is below ``tol`` relative to
+    the point, or the scaled gradient below ``tol``. Each trial point is linearised with its
+    residuals (nearly every one is taken). Returns the point, its residuals and the undamped
+    blocks ``A, B, C`` of its Gauss-Newton Hessian (:func:`_normal_equations`)."""
     nf = args[3].size
     bounds = args[8]
     x = p0.copy()
 
-    def linearise(x: np.ndarray) -> tuple:
+    def linearise(lin: tuple, huber: tuple) -> tuple:
         # iteratively reweighted: the Hessian's weights are the gradient's (a residual beyond
         # the Huber threshold keeps its curvature, scaled down), which keeps the steps sane
         # where the start explains a segment badly
-        lin = _jacobian(x, *args)
-        cost, wg, wh = _huber(lin[0], ROBUST_SCALE)
+        cost, wg, wh = huber
         return (cost, *_normal_equations(*lin, wg, wg, bounds), lin, wg, wh)
 
-    cost, A, B, C, gt, gd, lin, wg, wh = linearise(x)
+    lin = _jacobian(x, *args)
+    cost, A, B, C, gt, gd, lin, wg, wh = linearise(lin, _huber(lin[0], ROBUST_SCALE))
     mu = 1e-3
     nu = 2.0
     for _ in range(max_iter):
@@ -270,12 +381,14 @@ def _fit_huber(
         if np.linalg.norm(step / scale) <= tol * (tol + np.linalg.norm(x / scale)):
             break
         trial = x + step
-        cost_new = _huber(_residuals(trial, *args), ROBUST_SCALE)[0]
+        lin_new = _jacobian(trial, *args)
+        huber = _huber(lin_new[0], ROBUST_SCALE)
+        cost_new = huber[0]
         predicted = 0.5 * float(step @ (mu * d * step - g))
         gain = (cost - cost_new) / predicted if predicted > 0 else -1.0
         if math.isfinite(cost_new) and gain > 0:
             x, fell = trial, cost - cost_new
-            cost, A, B, C, gt, gd, lin, wg, wh = linearise(x)
+            cost, A, B, C, gt, gd, lin, wg, wh = linearise(lin_new, huber)
             mu *= 0.1 if gain > 0.75 else (1.0 if gain > 0.25 else 2.0)
             nu = 2.0
             if fell < tol * cost:
@@ -286,7 +399,7 @@ def _fit_huber(
     # the covariance's blocks: the Gauss-Newton Hessian of the Huber cost (no curvature beyond
     # the threshold)
     A, B, C = _normal_equations(*lin, wg, wh, bounds)[:3]
-    return x, A, B, C
+    return x, lin[0], A, B, C
 
 
 @njit(cache=True)
@@ -512,7 +625,7 @@ class SwingIdentifier:
         """The fit to the segments ``which`` of ``split`` from the relative coefficients ``z0``
         under ``prior`` (7 relative standard deviations) as ``(p0, scale, args)``: the starting
         point (coefficients, then each segment's initial-state correction), the unknowns' typical
-        sizes and the arguments of :func:`_residuals` after the point."""
+        sizes and the arguments of :func:`_jacobian` after the point."""
         segments = [split.segments[i] for i in which]
         Q = np.ascontiguousarray(np.concatenate([q for q, _ in segments]))
         U = np.ascontiguousarray(np.concatenate([u for _, u in segments]))
@@ -533,7 +646,7 @@ class SwingIdentifier:
         p0, scale, args = self._problem(split, which, z0, prior)
         nf, S, bounds = _FREE.size, len(which), args[8]
         nominal, prior, sig, ratio = self.nominal, args[5], self.angle_sigma, args[4]
-        x, A, B, C = _fit_huber(p0, scale, args)
+        x, r, A, B, C = _fit_huber(p0, scale, args)
         free = x[:nf]
         try:
             # the coefficients' block of the inverse Gauss-Newton Hessian: the inverse of the
@@ -552,7 +665,7 @@ class SwingIdentifier:
         sigma = np.empty(len(COEFFICIENTS))
         sigma[_FREE] = sd
         sigma[1] = sigma[3] * ratio
-        r = _residuals(x, *args)[nf:]
+        r = r[nf:]
         rms = np.array(
             [np.sqrt(np.mean(r[2 * a : 2 * b] ** 2)) for a, b in zip(bounds, bounds[1:])]
         )

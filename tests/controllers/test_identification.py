@@ -11,16 +11,18 @@ from scipy.optimize import least_squares
 import envs  # noqa: F401  (registers the ids)
 from controllers import make_reference_policy
 from controllers.identification import (
+    _INDEX,
     CHI2_99,
     COEFFICIENTS,
     DEFAULT_LONG_SEGMENT,
     EXPLAINED_RMS,
     ROBUST_SCALE,
     SwingIdentifier,
+    _acceleration_partials,
+    _coefficients,
     _fit_huber,
     _huber,
     _jacobian,
-    _residuals,
     robot_from_coefficients,
     simulate_swing,
 )
@@ -63,6 +65,79 @@ def test_simulated_swing_matches_an_independent_integrator():
         sol = solve_ivp(rhs, (k * DT, (k + 1) * DT), y, rtol=1e-11, atol=1e-12)
         y = sol.y[:, -1]
         assert np.allclose(q[k + 1], y[:2], atol=1e-8)
+
+
+def test_acceleration_partials_are_the_models_derivatives():
+    """By the state and by each coefficient, against the complex step through
+    ``model.accelerations`` (by the state on a robot without Coulomb friction, whose sign the
+    complex step would differentiate)."""
+    rng = np.random.default_rng(1)
+    h = 1e-30
+    for Fc in (0.0, 0.02):
+        P = nominal().replace(Fc=Fc).vector()
+        for _ in range(50):
+            x = rng.uniform([-0.6, -0.4, -3.0, -2.0], [0.6, 0.4, 3.0, 2.0])
+            u = rng.uniform(-3.0, 3.0)
+            D = np.empty((2, 11))
+            _acceleration_partials(P, *x, *model.accelerations(P, *x, u), D)
+            ref = np.empty((2, 11))
+            for j in range(4):
+                xc = x.astype(complex)
+                xc[j] += 1j * h
+                ref[:, j] = np.imag(model.accelerations(P.astype(complex), *xc, u)) / h
+            for j, k in enumerate(_INDEX):
+                Pc = P.astype(complex)
+                Pc[k] += 1j * h
+                ref[:, 4 + j] = np.imag(model.accelerations(Pc, *x, u)) / h
+            cols = slice(0 if Fc == 0.0 else 4, 11)
+            err = np.abs(D - ref)[:, cols] / np.abs(ref[:, cols]).max(axis=1, keepdims=True)
+            assert np.all(err < 1e-12), err
+
+
+def test_jacobian_is_the_derivative_of_the_simulated_residuals():
+    """The residuals are the simulated minus measured angles (bit for bit as
+    :func:`simulate_swing` integrates them) and the sensitivities' Jacobian is their derivative:
+    against central differences (Richardson-extrapolated) to 1e-8 of each column's largest
+    entry, at a point away from the fit's start."""
+    nom = nominal()
+    P = nom.perturbed(ERRORS).vector()
+    rng = np.random.default_rng(0)
+    ident = SwingIdentifier(nom, DT, angle_sigma=1e-3)
+    starts = [[-0.5, -0.25, 2.0, 1.2], [-0.42, -0.2, 1.6, 0.9], [-0.48, -0.23, 2.4, 1.0]]
+    for i, x0 in enumerate(starts):
+        u = stance_inputs(90, i)
+        ident.add_stance(
+            simulate_swing(P, np.array(x0), u, DT, 4) + rng.normal(0, 1e-3, (90, 2)), u
+        )
+    p0, scale, args = ident._problem(ident._short, [0, 1, 2, 4, 6, 7], ident._z, ident.prior)
+    Pm, index, nom_c, free_index, ratio, prior, Q, U, bounds, dt, nsub, sig = args
+    nf = free_index.size
+    p = p0 + 0.3 * scale * rng.normal(size=p0.size)
+    r, Jt, Jd = _jacobian(p, *args)
+
+    Pm = Pm.copy()
+    Pm[index] = nom_c * (1.0 + _coefficients(p[:nf], free_index, ratio))
+    np.testing.assert_array_equal(r[:nf], p[:nf] / prior)
+    for s, (a, b) in enumerate(zip(bounds, bounds[1:])):
+        d = p[nf + 4 * s : nf + 4 * s + 4]
+        sim = simulate_swing(
+            Pm, np.array([Q[a, 0] + d[0], Q[a, 1] + d[1], d[2], d[3]]), U[a:b], dt, nsub
+        )
+        np.testing.assert_array_equal(r[nf + 2 * a : nf + 2 * b], ((sim - Q[a:b]) / sig).ravel())
+
+    def central(cols, h):
+        e = p.copy()
+        e[cols] += h
+        up = _jacobian(e, *args)[0]
+        e[cols] -= 2 * h
+        return (up - _jacobian(e, *args)[0]) / (2 * h)
+
+    # the k-th initial-state component of every segment at once, as Jd holds them
+    cols = [[j] for j in range(nf)] + [list(range(nf + k, p.size, 4)) for k in range(4)]
+    ref = np.column_stack([(4 * central(c, 1e-4) - central(c, 2e-4)) / 3 for c in cols])
+    ref[:nf, nf:] = 0.0
+    J = np.hstack([Jt, Jd])
+    assert np.all(np.abs(J - ref) < 1e-8 * np.abs(J).max(axis=0))
 
 
 def test_fit_recovers_the_coefficients_of_a_perturbed_robot_from_its_stances():
@@ -327,10 +402,10 @@ def test_block_solver_reaches_scipys_huber_minimum_and_covariance():
         ident.add_stance(q, u)
     which = list(range(len(ident.segments)))
     p0, scale, args = ident._problem(ident._short, which, ident._z, ident.prior)
-    x, A, B, C = _fit_huber(p0, scale, args)
+    x, _, A, B, C = _fit_huber(p0, scale, args)
 
     def residuals(p):
-        return _residuals(p, *args)
+        return _jacobian(p, *args)[0]
 
     ref = least_squares(
         residuals, p0, x_scale=scale, loss="huber", f_scale=ROBUST_SCALE, xtol=1e-12, ftol=1e-12
