@@ -24,6 +24,7 @@ __all__ = [
     "bezier_derivative_coeffs",
     "bezier_on_basis",
     "chord_coefficients",
+    "phase_fraction",
     "second_coeff",
 ]
 
@@ -128,6 +129,13 @@ def second_coeff(
     return a0 + slope * (theta_minus - theta_plus) / order
 
 
+@njit(cache=True, error_model="numpy")
+def phase_fraction(theta: np.ndarray | float, theta_plus: float, span: float) -> np.ndarray | float:
+    """Normalised phase ``s = (theta - theta_plus) / span`` of the phase ``theta`` [rad] on a
+    step that starts at ``theta_plus`` [rad] and spans ``span`` [rad] (entry by entry)."""
+    return (theta - theta_plus) / span
+
+
 def bezier(coeffs: np.ndarray, s: np.ndarray | float, deriv: int = 0) -> np.ndarray | float:
     """Evaluate a Bezier polynomial (or a derivative in ``s``) at ``s``.
 
@@ -206,8 +214,12 @@ class BezierConstraint:
         return self.theta_minus - self.theta_plus
 
     def s(self, theta: np.ndarray | float) -> np.ndarray | float:
-        """Normalised phase ``(theta - theta_plus) / (theta_minus - theta_plus)``."""
-        return (np.asarray(theta, dtype=np.float64) - self.theta_plus) / self.span
+        """Normalised phase ``(theta - theta_plus) / (theta_minus - theta_plus)``
+        (:func:`phase_fraction`)."""
+        th = np.asarray(theta, dtype=np.float64)
+        if th.ndim == 0:
+            return np.float64(phase_fraction(float(th), self.theta_plus, self.span))
+        return phase_fraction(th, self.theta_plus, self.span)
 
     def phi(self, theta: np.ndarray | float) -> np.ndarray | float:
         """``phi(theta)`` [rad]."""

@@ -105,3 +105,15 @@ def test_derivatives_in_one_pass_are_phi_and_its_derivatives_bit_for_bit():
             ):
                 assert np.shape(got) == np.shape(want)
                 assert np.asarray(got).tobytes() == np.asarray(want).tobytes()
+
+
+def test_normalised_phase_is_the_compiled_fraction_of_the_span():
+    """``s`` is ``(theta - theta_plus) / span`` to the last bit (compiled, entry by entry): a
+    numpy float at a scalar, an array of the same shape otherwise, strided arrays included."""
+    rng = np.random.default_rng(8)
+    c = BezierConstraint(rng.normal(size=5), -0.2113, 0.2471)
+    for theta in (0.031, 3, rng.uniform(-0.3, 0.35, 17), rng.uniform(-0.3, 0.3, (4, 6))[:, ::2]):
+        want = (np.asarray(theta, dtype=np.float64) - c.theta_plus) / c.span
+        got = c.s(theta)
+        assert type(got) is type(want) and np.shape(got) == np.shape(want)
+        assert np.asarray(got).tobytes() == np.asarray(want).tobytes()
