@@ -55,14 +55,15 @@ STIFF_STEP = 1.0
 
 
 @_jit
-def _rhs(Z, A, G, Qw, T, out, n):
-    """``out = -Z A' - A Z + G - Z Qw Z`` (``G = B (wR)^-1 B'``, ``Qw = w Q``, all ``n x n``);
-    ``T`` scratch."""
+def _rhs(Z, A, G, Qw, s, T, out, n):
+    """``out = -Z A' - A Z + G - Z Qw Z`` (``G = B (wR)^-1 B'``, ``Qw = w Q``, all ``n x n``)
+    with the samples ``s`` of ``A, G, Qw`` (indexed in place: views of them would add
+    reference counting to every step); ``T`` scratch."""
     for i in range(n):  # T = Z Qw
         for k in range(n):
             acc = 0.0
             for m in range(n):
-                acc += Z[i, m] * Qw[m, k]
+                acc += Z[i, m] * Qw[s, m, k]
             T[i, k] = acc
     for i in range(n):
         for k in range(i, n):
@@ -70,10 +71,10 @@ def _rhs(Z, A, G, Qw, T, out, n):
             az_ki = 0.0
             zqz = 0.0
             for m in range(n):
-                az_ik += A[i, m] * Z[m, k]
-                az_ki += A[k, m] * Z[m, i]
+                az_ik += A[s, i, m] * Z[m, k]
+                az_ki += A[s, k, m] * Z[m, i]
                 zqz += T[i, m] * Z[m, k]
-            v = -az_ki - az_ik + G[i, k] - zqz
+            v = -az_ki - az_ik + G[s, i, k] - zqz
             out[i, k] = v
             out[k, i] = v
 
@@ -133,34 +134,35 @@ def _rate_bound(Z, Qw, terms, i0, im, i1, n):
 
 
 @_jit
-def _quadratic(X, i0, im, i1, tau, out, n):
-    """``X`` (``n x n`` samples) at ``tau`` in [0, 1] of the interval, through its samples at
-    0, 1/2 and 1."""
+def _quadratic(X, i0, im, i1, tau, out, p, n):
+    """``out[p]``: ``X`` (``n x n`` samples) at ``tau`` in [0, 1] of the interval, through its
+    samples at 0, 1/2 and 1."""
     l0 = 2.0 * (tau - 0.5) * (tau - 1.0)
     lm = -4.0 * tau * (tau - 1.0)
     l1 = 2.0 * tau * (tau - 0.5)
     for a in range(n):
         for b in range(n):
-            out[a, b] = l0 * X[i0, a, b] + lm * X[im, a, b] + l1 * X[i1, a, b]
+            out[p, a, b] = l0 * X[i0, a, b] + lm * X[im, a, b] + l1 * X[i1, a, b]
 
 
 @_jit
-def _rk4_step(Z, A1, Am, A0, G1, Gm, G0, Q1, Qm, Q0, h, T, k1, k2, k3, k4, Zt, n):
-    """One backward RK4 step of length ``h`` (``Z`` in place) with the equation's samples at
-    the step's start ``A1, G1, Q1`` (its larger ``s``), middle and end; the rest is scratch."""
-    _rhs(Z, A1, G1, Q1, T, k1, n)
+def _rk4_step(Z, A, G, Qw, s1, sm, s0, h, T, k1, k2, k3, k4, Zt, n):
+    """One backward RK4 step of length ``h`` (``Z`` in place) with the equation's samples
+    ``s1`` at the step's start (its larger ``s``), ``sm`` in the middle and ``s0`` at the end;
+    the rest is scratch."""
+    _rhs(Z, A, G, Qw, s1, T, k1, n)
     for a in range(n):
         for b in range(n):
             Zt[a, b] = Z[a, b] + 0.5 * h * k1[a, b]
-    _rhs(Zt, Am, Gm, Qm, T, k2, n)
+    _rhs(Zt, A, G, Qw, sm, T, k2, n)
     for a in range(n):
         for b in range(n):
             Zt[a, b] = Z[a, b] + 0.5 * h * k2[a, b]
-    _rhs(Zt, Am, Gm, Qm, T, k3, n)
+    _rhs(Zt, A, G, Qw, sm, T, k3, n)
     for a in range(n):
         for b in range(n):
             Zt[a, b] = Z[a, b] + h * k3[a, b]
-    _rhs(Zt, A0, G0, Q0, T, k4, n)
+    _rhs(Zt, A, G, Qw, s0, T, k4, n)
     for a in range(n):
         for b in range(n):
             Z[a, b] += (h / 6.0) * (k1[a, b] + 2.0 * k2[a, b] + 2.0 * k3[a, b] + k4[a, b])
@@ -175,13 +177,10 @@ def _substeps(Z, A, G, Qw, i0, im, i1, h, m, T, k1, k2, k3, k4, Zt, As, Gs, Qs, 
     for r in range(m):
         tau = 1.0 - r * dt
         for p, t in enumerate((tau, tau - 0.5 * dt, tau - dt)):
-            _quadratic(A, i0, im, i1, t, As[p], n)
-            _quadratic(G, i0, im, i1, t, Gs[p], n)
-            _quadratic(Qw, i0, im, i1, t, Qs[p], n)
-        _rk4_step(
-            Z, As[0], As[1], As[2], Gs[0], Gs[1], Gs[2], Qs[0], Qs[1], Qs[2], h / m,
-            T, k1, k2, k3, k4, Zt, n,
-        )  # fmt: skip
+            _quadratic(A, i0, im, i1, t, As, p, n)
+            _quadratic(G, i0, im, i1, t, Gs, p, n)
+            _quadratic(Qw, i0, im, i1, t, Qs, p, n)
+        _rk4_step(Z, As, Gs, Qs, 0, 1, 2, h / m, T, k1, k2, k3, k4, Zt, n)
 
 
 @_jit
@@ -227,10 +226,7 @@ def _solve_segments(A, G, Qw, ds, nsteps, offs, F, Qj_inv, Znodes, node_offs, n)
                 m = int(math.ceil(h * rate / STIFF_STEP))
                 _substeps(Z, A, G, Qw, i0, im, i1, h, m, T, k1, k2, k3, k4, Zt, As, Gs, Qs, n)
             else:
-                _rk4_step(
-                    Z, A[i1], A[im], A[i0], G[i1], G[im], G[i0], Qw[i1], Qw[im], Qw[i0], h,
-                    T, k1, k2, k3, k4, Zt, n,
-                )  # fmt: skip
+                _rk4_step(Z, A, G, Qw, i1, im, i0, h, T, k1, k2, k3, k4, Zt, n)
             Znodes[no + k] = Z
     return Z
 
