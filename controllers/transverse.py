@@ -346,7 +346,8 @@ class StepModel:
 
     def coords_jacobian(self, x: np.ndarray) -> np.ndarray:
         """``d x_perp / d x`` (3 x 4) at one state ``x``."""
-        return _coords_jacobian(*self._args, np.array([float(v) for v in x]))
+        q1, th, q1d, thd = (float(v) for v in x)
+        return _coords_jacobian(*self._args, np.array([q1, th, q1d, thd]))
 
     # ------------------------------------------------------------------ linearization
     def coefficients(self, theta: np.ndarray | float) -> tuple[np.ndarray, ...]:

@@ -221,7 +221,9 @@ def _models(rng, count):
         a = np.linspace(-2 * th0, 2 * th0, order + 1) + 0.05 * rng.standard_normal(order + 1)
         c = BezierConstraint(a, -th0 + 0.02 * rng.standard_normal(), th0)
         try:
-            out.append(StepModel(P, c, rng.uniform(0.9, 1.6), rng.uniform(-0.2, 0.2)))
+            slope = rng.uniform(-0.2, 0.2)  # a float or a numpy float, as a terrain gives it
+            slope = np.float64(slope) if k % 4 < 2 else slope
+            out.append(StepModel(P, c, rng.uniform(0.9, 1.6), slope))
         except ValueError:
             pass
     out.append(StepModel(P, BezierConstraint(np.array(MARGIN_A), *MARGIN_TH), 0.7753035964756947))
