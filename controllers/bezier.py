@@ -24,6 +24,7 @@ __all__ = [
     "bezier_derivative_coeffs",
     "bezier_on_basis",
     "chord_coefficients",
+    "phase_fraction",
     "second_coeff",
 ]
 
@@ -34,15 +35,17 @@ def _binomials(order: int) -> np.ndarray:
 
 
 @lru_cache(maxsize=64)
-def _derivative_weights(order: int, deriv: int) -> tuple[float, ...]:
+def _derivative_weights(order: int, deriv: int) -> np.ndarray:
     """The weights of the order-``(order - deriv)`` basis in the ``deriv``-th derivative's:
-    ``M!/(M-r)! (-1)^(r-i) C(r, i)``, ``i = 0 .. r``."""
+    ``M!/(M-r)! (-1)^(r-i) C(r, i)``, ``i = 0 .. r``; read-only."""
     scale = 1.0
     for i in range(deriv):
         scale *= order - i
-    return tuple(
-        scale * (-1.0) ** (deriv - i) * comb(deriv, i, exact=False) for i in range(deriv + 1)
+    out = np.array(
+        [scale * (-1.0) ** (deriv - i) * comb(deriv, i, exact=False) for i in range(deriv + 1)]
     )
+    out.flags.writeable = False
+    return out
 
 
 def bernstein_basis(order: int, s: np.ndarray | float, deriv: int = 0) -> np.ndarray:
@@ -70,20 +73,41 @@ def _bases(order: int, s: np.ndarray | float, derivs: tuple[int, ...]) -> list[n
     sb = s[..., None]
     k = np.arange(order + 1)
     up, down = sb**k, (1.0 - sb) ** k
+    rows = (-1, order + 1)
     bases = []
     for deriv in derivs:
         out = np.zeros(s.shape + (order + 1,))
         if deriv <= order:
-            m = order - deriv
-            # basis of order m: C(m, k) s^k (1 - s)^(m - k)
-            low = _binomials(m) * up[..., : m + 1] * down[..., m::-1]
-            # d^r/ds^r b(s) = M!/(M-r)! sum_k (Delta^r a)_k B_{k,M-r}(s); Delta^r a_k =
-            # sum_i (-1)^(r-i) C(r, i) a_{k+i}, so the basis of b^(r) w.r.t. a_j collects the
-            # terms with k + i = j.
-            for i, w in enumerate(_derivative_weights(order, deriv)):
-                out[..., i : i + m + 1] += w * low
+            _basis_from_powers(
+                up.reshape(rows),
+                down.reshape(rows),
+                _binomials(order - deriv),
+                _derivative_weights(order, deriv),
+                out.reshape(rows),
+            )
         bases.append(out)
     return bases
+
+
+@njit(cache=True, error_model="numpy")
+def _basis_from_powers(
+    up: np.ndarray, down: np.ndarray, binom: np.ndarray, weights: np.ndarray, out: np.ndarray
+) -> None:
+    """Adds to the basis rows ``out`` ``(K, M + 1)`` of a derivative of order ``r`` its terms
+    from the powers ``up = s^k`` and ``down = (1 - s)^k`` ``(K, M + 1)``, with ``binom`` the
+    binomial coefficients of order ``m = M - r`` and ``weights`` :func:`_derivative_weights`."""
+    m = binom.size - 1
+    low = np.empty(m + 1)
+    for row in range(up.shape[0]):
+        # basis of order m: C(m, k) s^k (1 - s)^(m - k)
+        for j in range(m + 1):
+            low[j] = binom[j] * up[row, j] * down[row, m - j]
+        # d^r/ds^r b(s) = M!/(M-r)! sum_k (Delta^r a)_k B_{k,M-r}(s); Delta^r a_k =
+        # sum_i (-1)^(r-i) C(r, i) a_{k+i}, so the basis of b^(r) w.r.t. a_j collects the
+        # terms with k + i = j, added in the order of i
+        for i in range(weights.size):
+            for j in range(m + 1):
+                out[row, i + j] += weights[i] * low[j]
 
 
 @njit(cache=True, error_model="numpy")
@@ -126,6 +150,13 @@ def second_coeff(
         The coefficient ``a_1`` [rad].
     """
     return a0 + slope * (theta_minus - theta_plus) / order
+
+
+@njit(cache=True, error_model="numpy")
+def phase_fraction(theta: np.ndarray | float, theta_plus: float, span: float) -> np.ndarray | float:
+    """Normalised phase ``s = (theta - theta_plus) / span`` of the phase ``theta`` [rad] on a
+    step that starts at ``theta_plus`` [rad] and spans ``span`` [rad] (entry by entry)."""
+    return (theta - theta_plus) / span
 
 
 def bezier(coeffs: np.ndarray, s: np.ndarray | float, deriv: int = 0) -> np.ndarray | float:
@@ -206,8 +237,12 @@ class BezierConstraint:
         return self.theta_minus - self.theta_plus
 
     def s(self, theta: np.ndarray | float) -> np.ndarray | float:
-        """Normalised phase ``(theta - theta_plus) / (theta_minus - theta_plus)``."""
-        return (np.asarray(theta, dtype=np.float64) - self.theta_plus) / self.span
+        """Normalised phase ``(theta - theta_plus) / (theta_minus - theta_plus)``
+        (:func:`phase_fraction`)."""
+        th = np.asarray(theta, dtype=np.float64)
+        if th.ndim == 0:
+            return np.float64(phase_fraction(float(th), self.theta_plus, self.span))
+        return phase_fraction(th, self.theta_plus, self.span)
 
     def phi(self, theta: np.ndarray | float) -> np.ndarray | float:
         """``phi(theta)`` [rad]."""

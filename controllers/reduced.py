@@ -35,6 +35,7 @@ _jit = njit(cache=True, error_model="numpy")
 __all__ = [
     "ChebyshevSeries",
     "cheb_nodes",
+    "chebyshev_point",
     "cumulative_integral",
     "cumulative_integral_matrix",
     "grid_cumulative_integral",
@@ -50,6 +51,7 @@ __all__ = [
     "phase_grid",
     "reduced_coefficients",
     "reduced_integral",
+    "series_at",
     "step_fractions",
     "step_time",
 ]
@@ -180,9 +182,11 @@ class ChebyshevSeries:
         self.theta_a, self.theta_b = float(theta_a), float(theta_b)
         self.coef = v @ _cheb_matrices(n)[1].T
 
-    def _x(self, theta: np.ndarray | float) -> np.ndarray:
+    def _x(self, theta: np.ndarray | float) -> np.ndarray | float:
         t = np.asarray(theta, dtype=np.float64)
-        return (2.0 * t - self.theta_a - self.theta_b) / (self.theta_b - self.theta_a)
+        if t.ndim == 0:
+            return chebyshev_point(float(t), self.theta_a, self.theta_b)
+        return chebyshev_point(t, self.theta_a, self.theta_b)
 
     def __call__(self, theta: np.ndarray | float) -> np.ndarray | float:
         return _series_at(self._x(theta), self.coef)
@@ -191,6 +195,22 @@ class ChebyshevSeries:
         """``d/dtheta`` of the interpolant."""
         dc = cheb.chebder(self.coef) * 2.0 / (self.theta_b - self.theta_a)
         return _series_at(self._x(theta), dc)
+
+
+@_jit
+def chebyshev_point(
+    theta: np.ndarray | float, theta_a: float, theta_b: float
+) -> np.ndarray | float:
+    """The point ``x`` of [-1, 1] of the phase ``theta`` [rad] on the interval
+    ``[theta_a, theta_b]`` [rad] of a :class:`ChebyshevSeries` (entry by entry)."""
+    return (2.0 * theta - theta_a - theta_b) / (theta_b - theta_a)
+
+
+@_jit
+def series_at(theta: np.ndarray, theta_a: float, theta_b: float, coef: np.ndarray) -> np.ndarray:
+    """Compiled :class:`ChebyshevSeries` call: the series ``coef`` (at least two coefficients)
+    on ``[theta_a, theta_b]`` [rad] at the phases ``theta`` (1-d) [rad]."""
+    return _clenshaw(chebyshev_point(theta, theta_a, theta_b), coef)
 
 
 def _series_at(x: np.ndarray, coef: np.ndarray) -> np.ndarray | float:
@@ -203,25 +223,41 @@ def _series_at(x: np.ndarray, coef: np.ndarray) -> np.ndarray | float:
 
 
 @_jit
-def _clenshaw_at(x, c):
-    """The Chebyshev series ``c`` (at least two coefficients) at one point ``x``, by
-    ``chebval``'s recurrence in its order."""
+def _clenshaw4(x0, x1, x2, x3, c):
+    """The Chebyshev series ``c`` (at least two coefficients) at four points, each by
+    ``chebval``'s recurrence in its order. The four recurrences run side by side: each step of
+    one waits on its previous step, so that one alone leaves the processor mostly idle."""
     n = c.size
-    x2 = 2.0 * x
-    c0, c1 = c[n - 2], c[n - 1]
+    t0, t1, t2, t3 = 2.0 * x0, 2.0 * x1, 2.0 * x2, 2.0 * x3
+    a0 = b0 = d0 = e0 = c[n - 2]
+    a1 = b1 = d1 = e1 = c[n - 1]
     for i in range(3, n + 1):
-        c0, c1 = c[n - i] - c1, c0 + c1 * x2
-    return c0 + c1 * x
+        ci = c[n - i]
+        a0, a1 = ci - a1, a0 + a1 * t0
+        b0, b1 = ci - b1, b0 + b1 * t1
+        d0, d1 = ci - d1, d0 + d1 * t2
+        e0, e1 = ci - e1, e0 + e1 * t3
+    return a0 + a1 * x0, b0 + b1 * x1, d0 + d1 * x2, e0 + e1 * x3
+
+
+@_jit
+def _clenshaw_at(x, c):
+    """The Chebyshev series ``c`` (at least two coefficients) at one point ``x`` (one of the
+    recurrences of :func:`_clenshaw4`, whose others take no longer alongside it)."""
+    return _clenshaw4(x, x, x, x, c)[0]
 
 
 @_jit
 def _clenshaw(x, c):
     """``numpy.polynomial.chebyshev.chebval(x, c)`` for 1-d ``x`` and ``c`` (at least two
-    coefficients), by its recurrence in its order (:func:`_clenshaw_at` at each point): the
-    same numbers, without its per-term array operations."""
+    coefficients), by its recurrence in its order (:func:`_clenshaw4`, four points at a time):
+    the same numbers, without its per-term array operations."""
     out = np.empty(x.size)
-    for j in range(x.size):
-        out[j] = _clenshaw_at(x[j], c)
+    last = x.size - 1
+    for j in range(0, x.size, 4):
+        v = _clenshaw4(x[j], x[min(j + 1, last)], x[min(j + 2, last)], x[min(j + 3, last)], c)
+        for k in range(min(4, x.size - j)):
+            out[j + k] = v[k]
     return out
 
 

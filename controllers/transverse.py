@@ -29,13 +29,16 @@ from scipy.optimize import brentq
 
 from envs.physics import model
 
-from .bezier import BezierConstraint
+from .bezier import BezierConstraint, phase_fraction
 from .reduced import (
     ChebyshevSeries,
+    cumulative_integral_matrix,
+    grid_reduced_integral,
     nominal_accelerations,
-    phase_grid,
+    phase_at,
     reduced_coefficients,
-    reduced_integral,
+    series_at,
+    step_fractions,
 )
 
 __all__ = [
@@ -46,6 +49,8 @@ __all__ = [
 ]
 
 _H = 1e-30  # complex-step size
+
+_jit = njit(cache=True, error_model="numpy")
 
 
 @functools.cache
@@ -63,7 +68,28 @@ def _power_fit(order: int) -> tuple[np.ndarray, np.ndarray, np.ndarray, float]:
     return sn, design, scale, len(sn) * np.finfo(np.float64).eps
 
 
-@njit(cache=True, error_model="numpy")
+@_jit
+def _power_derivative(c, m):
+    """``numpy.polynomial.polynomial.polyder(c, m)`` of 1-d coefficients ``c``: the same
+    products ``j c_j``, without its per-call set-up."""
+    if m >= c.size:
+        return c[:1] * 0.0
+    for _ in range(m):
+        d = np.empty(c.size - 1)
+        for j in range(1, c.size):
+            d[j - 1] = j * c[j]
+        c = d
+    return c
+
+
+@_jit
+def _phi_power_forms(pc, span, span_sq):
+    """The power forms of ``phi'`` and ``phi''`` in ``s`` from that of ``phi``, ``pc``, on a
+    step of span ``span`` (``span_sq``: its square as the caller takes it)."""
+    return _power_derivative(pc, 1) / span, _power_derivative(pc, 2) / span_sq
+
+
+@_jit
 def _power_series3(s, c0, c1, c2):
     """``numpy.polynomial.polynomial.polyval(s, c)`` of the three coefficient vectors at the
     points ``s`` (1-d), by its Horner recurrence in its order: the same numbers."""
@@ -76,6 +102,124 @@ def _power_series3(s, c0, c1, c2):
                 v = c[n - i] + v * s[j]
             out[r, j] = v
     return out
+
+
+# The compiled kernels below take a step model's arrays as StepModel._args lists them:
+# ``P, pc0, pc1, pc2, theta_plus, span, fa, fb, fcoef`` (robot parameters; phi, phi', phi'' in
+# power form in s; the step's start and span; the speed profile's Chebyshev series on [fa, fb]).
+# They evaluate each formula entry by entry in the order numpy evaluates it on arrays: the
+# same numbers, without numpy's per-call cost on these short arrays.
+
+
+@_jit
+def _constraint_rows(pc0, pc1, pc2, theta_plus, span, theta):
+    """``(phi, phi', phi'')`` as the rows of a ``(3, N)`` array at the phases ``theta`` (1-d)."""
+    return _power_series3(phase_fraction(theta, theta_plus, span), pc0, pc1, pc2)
+
+
+@_jit
+def _speed_profile_nodes(P, pc0, pc1, pc2, theta_plus, span, mid, a, b, fractions, q):
+    """``psi`` and ``Gam`` of the reduced dynamics (:func:`controllers.reduced.reduced_integral`)
+    on the Chebyshev grid of ``[a, b]`` (``fractions``, ``q``: its :func:`step_fractions` and
+    :func:`cumulative_integral_matrix`), and whether ``alpha`` keeps its sign at the phase
+    ``mid`` all over the grid (above 1e-12 times it); ``psi, Gam`` are not filled if not."""
+    dm = _constraint_rows(pc0, pc1, pc2, theta_plus, span, np.array([mid]))
+    sign = np.sign(reduced_coefficients(P, dm[0, 0], mid, dm[1, 0], dm[2, 0])[0])
+    th = phase_at(a, b - a, fractions)
+    d = _constraint_rows(pc0, pc1, pc2, theta_plus, span, th)
+    al, be, ga = reduced_coefficients(P, d[0], th, d[1], d[2])
+    psi, gam = np.empty(th.size), np.empty(th.size)
+    if not np.all(sign * al > 1e-12):
+        return psi, gam, False
+    grid_reduced_integral(al, be, ga, q, 0.5 * (th[-1] - th[0]), -math.inf, psi, gam)
+    return psi, gam, True
+
+
+@_jit
+def _speed_slope(P, pc0, pc1, pc2, theta_plus, span, fa, fb, fcoef, theta):
+    """:meth:`StepModel.dthetadot_sq` at the phases ``theta`` (1-d)."""
+    d = _constraint_rows(pc0, pc1, pc2, theta_plus, span, theta)
+    al, be, ga = reduced_coefficients(P, d[0], theta, d[1], d[2])
+    return 2.0 * nominal_accelerations(al, be, ga, d[1], d[2], series_at(theta, fa, fb, fcoef))[1]
+
+
+@_jit
+def _nominal_states(P, pc0, pc1, pc2, theta_plus, span, fa, fb, fcoef, theta):
+    """:meth:`StepModel.nominal_state` at the phases ``theta`` (1-d), shape ``(N, 4)``."""
+    d = _constraint_rows(pc0, pc1, pc2, theta_plus, span, theta)
+    td = np.sqrt(series_at(theta, fa, fb, fcoef))
+    out = np.empty((theta.size, 4))
+    out[:, 0] = d[0]
+    out[:, 1] = theta + 0.0 * d[0]
+    out[:, 2] = d[1] * td
+    out[:, 3] = td + 0.0 * d[0]
+    return out
+
+
+@_jit
+def _coords_jacobian(P, pc0, pc1, pc2, theta_plus, span, fa, fb, fcoef, x):
+    """:meth:`StepModel.coords_jacobian` at the state ``x`` (4,)."""
+    th = np.array([x[1]])
+    thd = x[3]
+    d = _constraint_rows(pc0, pc1, pc2, theta_plus, span, th)
+    dF = _speed_slope(P, pc0, pc1, pc2, theta_plus, span, fa, fb, fcoef, th)[0]
+    J = np.zeros((3, 4))
+    J[0, 1], J[0, 3] = -dF, 2.0 * thd
+    J[1, 0], J[1, 1] = 1.0, -d[1, 0]
+    J[2, 1], J[2, 2], J[2, 3] = -d[2, 0] * thd, 1.0, -d[1, 0]
+    return J
+
+
+@_jit
+def _surface_gradient(P, slope, q1, q2):
+    """:meth:`StepModel.surface_gradient` of the ground line of slope ``slope``."""
+    g = np.zeros(4)
+    for i in range(2):
+        if i == 0:
+            a, b = q1 + 1j * _H, q2 + 0j
+        else:
+            a, b = q1 + 0j, q2 + 1j * _H
+        fx, fy = model.swing_foot_position(P, a, b, 0.0, 0.0)
+        g[i] = (fy - slope * fx).imag / _H
+    return g
+
+
+@_jit
+def _linearization(P, pc0, pc1, pc2, theta_plus, span, fa, fb, fcoef, theta):
+    """:meth:`StepModel.coefficients` at the phases ``theta`` (1-d)."""
+    d = _constraint_rows(pc0, pc1, pc2, theta_plus, span, theta)
+    phi, dphi, ddphi = d[0], d[1], d[2]
+    al, be, ga = reduced_coefficients(P, phi, theta, dphi, ddphi)
+    F = series_at(theta, fa, fb, fcoef)
+    td = np.sqrt(F)
+    q1dd, thdd = nominal_accelerations(al, be, ga, dphi, ddphi, F)
+    # complex step in q1 (and q1d) of the unactuated row
+    #   Phi(q1, q1d) = M21(q1) (phi' thdd + phi'' td^2) + M22(q1) thdd + [C qd]_2 + G2
+    q1c = phi + 1j * _H
+    _, m12, m22 = model.mass_matrix(P, q1c)
+    _, c2 = model.coriolis(P, q1c, dphi * td + 0j, td + 0j)
+    _, g2 = model.gravity(P, q1c, theta + 0j)
+    dPhi_dq1 = np.imag(m12 * q1dd + m22 * thdd + c2 + g2) / _H
+    _, c2d = model.coriolis(P, phi + 0j, dphi * td + 1j * _H, td + 0j)
+    dPhi_dq1d = np.imag(c2d) / _H
+    m12r = model.mass_matrix(P, phi)[1]
+    g_y, g_yd, g_v = -dPhi_dq1, -dPhi_dq1d, -m12r
+    k = 2.0 * td / al
+    return -k * be, k * g_y, k * g_yd, k * g_v, td
+
+
+@_jit
+def _phase_linearization(P, pc0, pc1, pc2, theta_plus, span, fa, fb, fcoef, theta):
+    """:meth:`StepModel.phase_matrices` at the phases ``theta`` (1-d)."""
+    a11, a12, a13, b1, td = _linearization(P, pc0, pc1, pc2, theta_plus, span, fa, fb, fcoef, theta)
+    n = a11.size
+    A = np.zeros((n, 3, 3))
+    B = np.zeros((n, 3, 1))
+    for i in range(n):
+        A[i, 0, 0], A[i, 0, 1], A[i, 0, 2] = a11[i] / td[i], a12[i] / td[i], a13[i] / td[i]
+        A[i, 1, 2] = 1.0 / td[i]
+        B[i, 0, 0], B[i, 2, 0] = b1[i] / td[i], 1.0 / td[i]
+    return A, B, 1.0 / td
 
 
 @dataclass
@@ -105,6 +249,7 @@ class StepModel:
     n_cheb: int = 48
     _F: ChebyshevSeries = field(init=False, repr=False)
     _pc: tuple = field(init=False, repr=False)
+    _args: tuple = field(init=False, repr=False, compare=False)
 
     def __post_init__(self) -> None:
         c = self.constraint
@@ -114,21 +259,20 @@ class StepModel:
         sn, design, scale, rcond = _power_fit(c.order)
         # numpy.polynomial.polynomial.polyfit(sn, phi, order), its design matrix made once
         pc = np.linalg.lstsq(design, c.phi(c.theta_plus + sn * c.span), rcond)[0] / scale
-        self._pc = (pc, npoly.polyder(pc) / c.span, npoly.polyder(pc, 2) / c.span**2)
+        self._pc = (pc, *_phi_power_forms(pc, c.span, c.span**2))
         # the constraint continued past the step's ends may be singular or stall the walker
         # there (a steep polynomial): the margin then halves until neither happens
         margins = [self.margin * 0.5**k for k in range(4)] + [0.0]
         mid = 0.5 * (c.theta_plus + c.theta_minus)
-        sign = np.sign(reduced_coefficients(self.P, *self._at(mid))[0])
+        grid = (step_fractions(self.n_cheb), cumulative_integral_matrix(self.n_cheb))
         for margin in dict.fromkeys(margins):
             a = c.theta_plus - margin * c.span
             b = c.theta_minus + margin * c.span
-            th = phase_grid(a, b, self.n_cheb)
-            phi, dphi, ddphi = self.derivatives(th)
-            al, be, ga = reduced_coefficients(self.P, phi, th, dphi, ddphi)
-            if not np.all(sign * al > 1e-12):
+            psi, gam, alpha_ok = _speed_profile_nodes(
+                self.P, *self._pc, c.theta_plus, c.span, mid, a, b, *grid
+            )
+            if not alpha_ok:
                 continue
-            psi, gam = reduced_integral(th, al, be, ga)
             # F(theta) = psi(theta, a) Fa + Gam(theta, a), with Fa fixed by F(theta_plus)
             psi_s, gam_s = ChebyshevSeries(psi, a, b), ChebyshevSeries(gam, a, b)
             fa = (self.thetadot_plus**2 - gam_s(c.theta_plus)) / psi_s(c.theta_plus)
@@ -136,11 +280,11 @@ class StepModel:
             # positive at the nodes and between them (the interpolant can dip below zero
             # between nodes on a step that nearly stalls, and theta_dot = sqrt(F) is taken
             # on other grids)
-            dense = np.linspace(a, b, 257)
-            F_min = min(F_nodes.min(), ChebyshevSeries(F_nodes, a, b)(dense).min())
+            F = ChebyshevSeries(F_nodes, a, b)
+            F_min = min(F_nodes.min(), F(np.linspace(a, b, 257)).min())
             if F_min > 0:
                 break
-        if not np.all(sign * al > 1e-12):
+        if not alpha_ok:
             raise ValueError("StepModel: alpha(theta) vanishes on the step (singular constraint)")
         if not F_min > 0:
             raise ValueError(
@@ -148,20 +292,18 @@ class StepModel:
                 f"(min {F_min:.3g} rad^2/s^2): the walker would stall"
             )
         self.margin = margin
-        self._F = ChebyshevSeries(F_nodes, a, b)
+        self._F = F
+        self._args = (self.P, *self._pc, c.theta_plus, c.span, F.theta_a, F.theta_b, F.coef)
 
     # ------------------------------------------------------------------ nominal motion
     def derivatives(self, theta: np.ndarray | float) -> tuple[np.ndarray, ...]:
         """``(phi, phi', phi'')`` at ``theta`` (the constraint in power form, fast)."""
-        s = np.asarray(self.constraint.s(theta), dtype=np.float64)
-        out = _power_series3(s.reshape(-1), *self._pc)
-        if s.ndim == 0:
+        th = np.asarray(theta, dtype=np.float64)
+        c = self.constraint
+        out = _constraint_rows(*self._pc, c.theta_plus, c.span, th.reshape(-1))
+        if th.ndim == 0:
             return out[0, 0], out[1, 0], out[2, 0]
-        return out[0].reshape(s.shape), out[1].reshape(s.shape), out[2].reshape(s.shape)
-
-    def _at(self, theta: float) -> tuple[float, float, float, float]:
-        phi, dphi, ddphi = self.derivatives(theta)
-        return float(phi), float(theta), float(dphi), float(ddphi)
+        return out[0].reshape(th.shape), out[1].reshape(th.shape), out[2].reshape(th.shape)
 
     @property
     def power_coefficients(self) -> np.ndarray:
@@ -186,17 +328,13 @@ class StepModel:
     def dthetadot_sq(self, theta: np.ndarray | float) -> np.ndarray | float:
         """``d F* / d theta = -2 (beta F* + gamma) / alpha`` [rad/s^2]."""
         th = np.asarray(theta, dtype=np.float64)
-        phi, dphi, ddphi = self.derivatives(th)
-        al, be, ga = reduced_coefficients(self.P, phi, th, dphi, ddphi)
-        out = 2.0 * nominal_accelerations(al, be, ga, dphi, ddphi, self._F(th))[1]
-        return float(out) if np.ndim(out) == 0 else out
+        out = _speed_slope(*self._args, th.reshape(-1))
+        return float(out[0]) if th.ndim == 0 else out.reshape(th.shape)
 
     def nominal_state(self, theta: np.ndarray | float) -> np.ndarray:
         """Nominal ``(q1, q2, q1d, q2d)`` at ``theta`` (last axis)."""
         th = np.asarray(theta, dtype=np.float64)
-        phi, dphi, _ = self.derivatives(th)
-        td = np.sqrt(self._F(th))
-        return np.stack([phi, th + 0.0 * phi, dphi * td, td + 0.0 * phi], axis=-1)
+        return _nominal_states(*self._args, th.reshape(-1)).reshape(th.shape + (4,))
 
     # ------------------------------------------------------------------ coordinates
     def coords(self, x: np.ndarray) -> np.ndarray:
@@ -209,15 +347,7 @@ class StepModel:
     def coords_jacobian(self, x: np.ndarray) -> np.ndarray:
         """``d x_perp / d x`` (3 x 4) at one state ``x``."""
         q1, th, q1d, thd = (float(v) for v in x)
-        _, dphi, ddphi = self.derivatives(th)
-        dF = self.dthetadot_sq(th)
-        return np.array(
-            [
-                [0.0, -dF, 0.0, 2.0 * thd],
-                [1.0, -dphi, 0.0, 0.0],
-                [0.0, -ddphi * thd, 1.0, -dphi],
-            ]
-        )
+        return _coords_jacobian(*self._args, np.array([q1, th, q1d, thd]))
 
     # ------------------------------------------------------------------ linearization
     def coefficients(self, theta: np.ndarray | float) -> tuple[np.ndarray, ...]:
@@ -227,26 +357,8 @@ class StepModel:
         ``b1 = 2 td g_v / alpha`` (control notes, section 3) with ``td`` the nominal
         ``theta_dot``.
         """
-        P = self.P
         th = np.atleast_1d(np.asarray(theta, dtype=np.float64))
-        phi, dphi, ddphi = self.derivatives(th)
-        al, be, ga = reduced_coefficients(P, phi, th, dphi, ddphi)
-        F = self._F(th)
-        td = np.sqrt(F)
-        q1dd, thdd = nominal_accelerations(al, be, ga, dphi, ddphi, F)
-        # complex step in q1 (and q1d) of the unactuated row
-        #   Phi(q1, q1d) = M21(q1) (phi' thdd + phi'' td^2) + M22(q1) thdd + [C qd]_2 + G2
-        q1c = phi + 1j * _H
-        _, m12, m22 = model.mass_matrix(P, q1c)
-        _, c2 = model.coriolis(P, q1c, dphi * td + 0j, td + 0j)
-        _, g2 = model.gravity(P, q1c, th + 0j)
-        dPhi_dq1 = np.imag(m12 * q1dd + m22 * thdd + c2 + g2) / _H
-        _, c2d = model.coriolis(P, phi + 0j, dphi * td + 1j * _H, td + 0j)
-        dPhi_dq1d = np.imag(c2d) / _H
-        m12r = model.mass_matrix(P, phi)[1]
-        g_y, g_yd, g_v = -dPhi_dq1, -dPhi_dq1d, -m12r
-        k = 2.0 * td / al
-        return -k * be, k * g_y, k * g_yd, k * g_v, td
+        return tuple(v.reshape(th.shape) for v in _linearization(*self._args, th.reshape(-1)))
 
     def matrices(self, theta: np.ndarray | float) -> tuple[np.ndarray, np.ndarray]:
         """``A(theta)`` (..., 3, 3) and ``B(theta)`` (..., 3, 1) of ``z' = A z + B v`` in time
@@ -263,14 +375,8 @@ class StepModel:
     def phase_matrices(self, theta: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """``A / theta_dot``, ``B / theta_dot`` and ``w = 1 / theta_dot`` at ``theta``: the
         linearization with the phase as independent variable (``dz/dtheta``)."""
-        a11, a12, a13, b1, td = self.coefficients(theta)
-        n = a11.size
-        A = np.zeros((n, 3, 3))
-        A[:, 0, 0], A[:, 0, 1], A[:, 0, 2] = a11 / td, a12 / td, a13 / td
-        A[:, 1, 2] = 1.0 / td
-        B = np.zeros((n, 3, 1))
-        B[:, 0, 0], B[:, 2, 0] = b1 / td, 1.0 / td
-        return A, B, 1.0 / td
+        th = np.asarray(theta, dtype=np.float64).reshape(-1)
+        return _phase_linearization(*self._args, th)
 
     # ------------------------------------------------------------------ switching surface
     def surface(self, q1: float, q2: float) -> float:
@@ -282,12 +388,7 @@ class StepModel:
 
     def surface_gradient(self, q1: float, q2: float) -> np.ndarray:
         """``dS/dx`` (4,) at configuration ``(q1, q2)``."""
-        x0, y0 = self._foothold()
-        g = np.zeros(4)
-        for i, (a, b) in enumerate(((q1 + 1j * _H, q2 + 0j), (q1 + 0j, q2 + 1j * _H))):
-            fx, fy = model.swing_foot_position(self.P, a, b, 0.0, 0.0)
-            g[i] = np.imag(fy - self.ground_slope * fx) / _H
-        return g
+        return _surface_gradient(self.P, float(self.ground_slope), float(q1), float(q2))
 
     def _foothold(self) -> tuple[float, float]:
         c = self.constraint
@@ -317,17 +418,36 @@ def _impact_map(P: np.ndarray, x: np.ndarray) -> np.ndarray:
     return np.array(model.impact(P, x[0], x[1], x[2], x[3]))
 
 
+@_jit
+def _impact_terms(step, theta_minus, slope, nxt):
+    """The factors of :func:`impact_jacobian` from the arrays of its two models: ``[dT-; dS]``
+    at the nominal pre-impact state (4 x 4), ``dDelta`` there (4 x 4) and ``dT+`` after the
+    impact (3 x 4)."""
+    xm = _nominal_states(*step, np.array([theta_minus]))[0]
+    D = np.empty((4, 4))
+    D[:3] = _coords_jacobian(*step, xm)
+    D[3] = _surface_gradient(step[0], slope, xm[0], xm[1])
+    xc = np.empty((4, 4), dtype=np.complex128)
+    for r in range(4):
+        for k in range(4):
+            xc[r, k] = complex(xm[r], 0.0) + 1j * _H * (1.0 if r == k else 0.0)
+    q1, q2, q1d, q2d = model.impact(step[0], xc[0], xc[1], xc[2], xc[3])
+    dDelta = np.empty((4, 4))
+    dDelta[0], dDelta[1] = np.imag(q1) / _H, np.imag(q2) / _H
+    dDelta[2], dDelta[3] = np.imag(q1d) / _H, np.imag(q2d) / _H
+    xp = np.array(model.impact(step[0], xm[0], xm[1], xm[2], xm[3]))
+    return D, dDelta, _coords_jacobian(*nxt, xp)
+
+
+_SURFACE_RHS = np.vstack([np.eye(3), np.zeros((1, 3))])
+_SURFACE_RHS.flags.writeable = False
+
+
 def impact_jacobian(step: StepModel, nxt: StepModel) -> np.ndarray:
     """Closed-form ``F_j`` (3 x 3): transverse coordinates of ``step`` on its switching surface
     to those of ``nxt`` after the impact, ``F = dT+ dDelta [dT-; dS]^-1 [I_3; 0]``."""
-    Pv = step.P
-    xm = step.nominal_state(step.theta_minus)
-    D = np.vstack([step.coords_jacobian(xm), step.surface_gradient(xm[0], xm[1])])
-    dXs = np.linalg.solve(D, np.vstack([np.eye(3), np.zeros((1, 3))]))
-    xc = np.tile(xm.astype(complex)[:, None], (1, 4)) + 1j * _H * np.eye(4)
-    dDelta = np.imag(np.array(model.impact(Pv, xc[0], xc[1], xc[2], xc[3]))) / _H
-    xp = _impact_map(Pv, xm)
-    return nxt.coords_jacobian(xp) @ dDelta @ dXs
+    D, dDelta, dT = _impact_terms(step._args, step.theta_minus, float(step.ground_slope), nxt._args)
+    return dT @ dDelta @ np.linalg.solve(D, _SURFACE_RHS)
 
 
 def impact_jacobian_fd(step: StepModel, nxt: StepModel, h: float = 1e-6) -> np.ndarray:

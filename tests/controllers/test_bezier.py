@@ -105,3 +105,40 @@ def test_derivatives_in_one_pass_are_phi_and_its_derivatives_bit_for_bit():
             ):
                 assert np.shape(got) == np.shape(want)
                 assert np.asarray(got).tobytes() == np.asarray(want).tobytes()
+
+
+def test_normalised_phase_is_the_compiled_fraction_of_the_span():
+    """``s`` is ``(theta - theta_plus) / span`` to the last bit (compiled, entry by entry): a
+    numpy float at a scalar, an array of the same shape otherwise, strided arrays included."""
+    rng = np.random.default_rng(8)
+    c = BezierConstraint(rng.normal(size=5), -0.2113, 0.2471)
+    for theta in (0.031, 3, rng.uniform(-0.3, 0.35, 17), rng.uniform(-0.3, 0.3, (4, 6))[:, ::2]):
+        want = (np.asarray(theta, dtype=np.float64) - c.theta_plus) / c.span
+        got = c.s(theta)
+        assert type(got) is type(want) and np.shape(got) == np.shape(want)
+        assert np.asarray(got).tobytes() == np.asarray(want).tobytes()
+
+
+def test_compiled_basis_is_its_numpy_formula_bit_for_bit():
+    """The basis (compiled from numpy's powers of ``s`` and ``1 - s``) is what the formula gives
+    on numpy arrays, to the last bit: every order and derivative, at a scalar and at arrays."""
+    from scipy.special import comb
+
+    rng = np.random.default_rng(9)
+    for order in range(9):
+        for s in (0.37, rng.uniform(-0.2, 1.2, 7), rng.uniform(-0.2, 1.2, (3, 5)), np.zeros(0)):
+            sb = np.asarray(s)[..., None]
+            k = np.arange(order + 1)
+            up, down = sb**k, (1.0 - sb) ** k
+            for deriv in range(4):
+                want = np.zeros(np.shape(s) + (order + 1,))
+                if deriv <= order:
+                    m = order - deriv
+                    low = comb(m, np.arange(m + 1), exact=False) * up[..., : m + 1]
+                    low = low * down[..., m::-1]
+                    scale = float(np.prod(np.arange(order, m, -1.0)))
+                    for i in range(deriv + 1):
+                        w = scale * (-1.0) ** (deriv - i) * comb(deriv, i, exact=False)
+                        want[..., i : i + m + 1] += w * low
+                got = bernstein_basis(order, s, deriv)
+                assert got.shape == want.shape and got.tobytes() == want.tobytes()

@@ -133,6 +133,24 @@ def test_the_series_is_numpys_chebval_bit_for_bit():
                     assert got.shape == want.shape and got.tobytes() == want.tobytes()
 
 
+def test_the_compiled_series_is_numpys_chebval_bit_for_bit_four_points_at_a_time():
+    """The compiled call (:func:`series_at`, four recurrences side by side) gives ``chebval``
+    of the series' points to the last bit, on grids of every length modulo four, and so does
+    one point at a time."""
+    from numpy.polynomial import chebyshev as cheb
+
+    rng = np.random.default_rng(6)
+    for ncoef in (2, 3, 5, 49):
+        coef = rng.standard_normal(ncoef) * 10.0 ** rng.integers(-3, 3, ncoef)
+        for size in (*range(10), 81, 257):
+            theta = rng.uniform(-0.35, 0.45, size)
+            x = (2.0 * theta - -0.3 - 0.4) / (0.4 - -0.3)
+            assert rd.chebyshev_point(theta, -0.3, 0.4).tobytes() == x.tobytes()
+            got = rd.series_at(theta, -0.3, 0.4, coef)
+            assert got.shape == (size,) and got.tobytes() == cheb.chebval(x, coef).tobytes()
+            assert all(rd._clenshaw_at(v, coef) == cheb.chebval(v, coef) for v in x)
+
+
 def test_bad_grid_and_nonpositive_speed_raise():
     with pytest.raises(ValueError, match="grid size"):
         rd.cheb_nodes(2)

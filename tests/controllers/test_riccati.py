@@ -4,6 +4,7 @@ import numpy as np
 import pytest
 from scipy.integrate import solve_ivp
 
+from controllers import riccati
 from controllers.riccati import solve_jump_riccati
 
 LENGTHS = [0.5, 0.4, 0.6, 0.45]
@@ -146,6 +147,28 @@ def test_jump_at_singular_Z_uses_woodbury_form():
     np.testing.assert_allclose(
         sol.Z[0][-1], np.linalg.inv(F[0].T @ np.linalg.solve(Zp, F[0]) + np.eye(3)), atol=1e-12
     )
+
+
+def test_three_coordinates_are_solved_as_the_generic_solve_does_bit_for_bit(problem, monkeypatch):
+    """With n = 3 the solve runs compiled for that size (its products unrolled): the same
+    numbers, to the last bit, as the solve compiled for any n, on plain and on substepped
+    (stiff) intervals, across the jumps and in the gains; one jump weight or one per jump."""
+    F, Q, R, Qj, _ = problem
+    A, B, W = _samples(20)
+
+    def generic(A, *args):  # called from Python, n is a plain integer
+        riccati._solve_segments(A, *args, A.shape[1])
+
+    for Qs, Qjs in ((Q, Qj), (np.diag([1.0, 160000.0, 800.0]), [Qj, 2.0 * Qj, np.eye(3)])):
+        fast = solve_jump_riccati(A, B, LENGTHS, F, Qs, R, Qjs, w=W, gain_segments=2)
+        with monkeypatch.context() as m:
+            m.setattr(riccati, "_solve", generic)
+            ref = solve_jump_riccati(A, B, LENGTHS, F, Qs, R, Qjs, w=W, gain_segments=2)
+        for j in range(len(LENGTHS)):
+            assert fast.Z[j].tobytes() == ref.Z[j].tobytes()
+        for j in range(2):
+            assert fast.K[j].tobytes() == ref.K[j].tobytes()
+            assert fast.Zinv[j].tobytes() == ref.Zinv[j].tobytes()
 
 
 def test_bad_inputs_raise():

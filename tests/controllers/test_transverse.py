@@ -5,7 +5,12 @@ import pytest
 from scipy.integrate import solve_ivp
 
 from controllers.bezier import BezierConstraint
-from controllers.reduced import pfl_terms
+from controllers.reduced import (
+    ChebyshevSeries,
+    nominal_accelerations,
+    pfl_terms,
+    reduced_coefficients,
+)
 from controllers.transverse import StepModel, impact_jacobian, impact_jacobian_fd, surface_state
 from envs.physics import model
 from envs.physics.params import RobotParams
@@ -202,3 +207,161 @@ def test_power_form_is_numpys_polyfit_and_polyval_bit_for_bit():
                 want = npoly.polyval(s, coef)
                 assert np.shape(got) == np.shape(want)
                 assert np.asarray(got).tobytes() == np.asarray(want).tobytes()
+
+
+# ---------------------------------------------------------------------------- compiled = numpy
+def _models(rng, count):
+    """Random steps around the hand-made chain's (both robots, orders 4 to 6, sloped switching
+    surfaces), and the two steps whose speed profile needs a shorter margin."""
+    out = []
+    for k in range(count):
+        P = RobotParams.from_preset(("paper", "classic")[k % 2]).vector()
+        order = 4 + k % 3
+        th0 = rng.uniform(0.15, 0.25)
+        a = np.linspace(-2 * th0, 2 * th0, order + 1) + 0.05 * rng.standard_normal(order + 1)
+        c = BezierConstraint(a, -th0 + 0.02 * rng.standard_normal(), th0)
+        try:
+            slope = rng.uniform(-0.2, 0.2)  # a float or a numpy float, as a terrain gives it
+            slope = np.float64(slope) if k % 4 < 2 else slope
+            out.append(StepModel(P, c, rng.uniform(0.9, 1.6), slope))
+        except ValueError:
+            pass
+    out.append(StepModel(P, BezierConstraint(np.array(MARGIN_A), *MARGIN_TH), 0.7753035964756947))
+    return out
+
+
+MARGIN_A = [-0.29102594500881324, -0.2640678151438681, 0.0928026563809734, 1.3565597272147574]
+MARGIN_A += [0.13804921681533533, 0.30097754751602745, 0.273031028035243]
+MARGIN_TH = (-0.14551297250440662, 0.09976735897462588)
+
+
+def _ref_derivatives(m, th):
+    """``(phi, phi', phi'')`` by numpy's polyval of the model's power form."""
+    from numpy.polynomial import polynomial as npoly
+
+    c, pc = m.constraint, m.power_coefficients
+    s = (np.asarray(th, dtype=np.float64) - c.theta_plus) / c.span
+    ders = (pc, npoly.polyder(pc) / c.span, npoly.polyder(pc, 2) / c.span**2)
+    return tuple(npoly.polyval(s, d) for d in ders)
+
+
+def _ref_speed(m, th):
+    """The speed profile ``F*`` by numpy's chebval of the model's series."""
+    from numpy.polynomial import chebyshev as cheb
+
+    F = m._F
+    x = (2.0 * np.asarray(th, dtype=np.float64) - F.theta_a - F.theta_b) / (F.theta_b - F.theta_a)
+    return cheb.chebval(x, F.coef)
+
+
+def _ref_profile(m):
+    """``(margin, F* at the Chebyshev nodes)`` as the speed profile was built with numpy arrays
+    (the model's power form given)."""
+    from controllers.reduced import phase_grid, reduced_integral
+
+    c = m.constraint
+    mid = 0.5 * (c.theta_plus + c.theta_minus)
+    phi, dphi, ddphi = (float(v) for v in _ref_derivatives(m, mid))
+    sign = np.sign(reduced_coefficients(m.P, phi, mid, dphi, ddphi)[0])
+    for margin in dict.fromkeys([0.15 * 0.5**k for k in range(4)] + [0.0]):
+        a, b = c.theta_plus - margin * c.span, c.theta_minus + margin * c.span
+        th = phase_grid(a, b, 48)
+        phi, dphi, ddphi = _ref_derivatives(m, th)
+        al, be, ga = reduced_coefficients(m.P, phi, th, dphi, ddphi)
+        if not np.all(sign * al > 1e-12):
+            continue
+        psi, gam = reduced_integral(th, al, be, ga)
+        psi_s, gam_s = ChebyshevSeries(psi, a, b), ChebyshevSeries(gam, a, b)
+        fa = (m.thetadot_plus**2 - gam_s(c.theta_plus)) / psi_s(c.theta_plus)
+        F_nodes = psi * fa + gam
+        if min(F_nodes.min(), ChebyshevSeries(F_nodes, a, b)(np.linspace(a, b, 257)).min()) > 0:
+            return margin, F_nodes
+
+
+def _ref_coefficients(m, th):
+    """``(a11, a12, a13, b1, thetadot)``: the complex steps through the model on numpy arrays."""
+    P, H = m.P, 1e-30
+    phi, dphi, ddphi = _ref_derivatives(m, th)
+    al, be, ga = reduced_coefficients(P, phi, th, dphi, ddphi)
+    F = _ref_speed(m, th)
+    td = np.sqrt(F)
+    q1dd, thdd = nominal_accelerations(al, be, ga, dphi, ddphi, F)
+    q1c = phi + 1j * H
+    _, m12, m22 = model.mass_matrix(P, q1c)
+    _, c2 = model.coriolis(P, q1c, dphi * td + 0j, td + 0j)
+    _, g2 = model.gravity(P, q1c, th + 0j)
+    dPhi_dq1 = np.imag(m12 * q1dd + m22 * thdd + c2 + g2) / H
+    _, c2d = model.coriolis(P, phi + 0j, dphi * td + 1j * H, td + 0j)
+    k = 2.0 * td / al
+    return -k * be, k * -dPhi_dq1, k * -(np.imag(c2d) / H), k * -model.mass_matrix(P, phi)[1], td
+
+
+def _ref_dthetadot_sq(m, th):
+    phi, dphi, ddphi = _ref_derivatives(m, th)
+    al, be, ga = reduced_coefficients(m.P, phi, th, dphi, ddphi)
+    return 2.0 * nominal_accelerations(al, be, ga, dphi, ddphi, _ref_speed(m, th))[1]
+
+
+def _ref_coords_jacobian(m, x):
+    _, th, _, thd = (float(v) for v in x)
+    _, dphi, ddphi = (float(v) for v in _ref_derivatives(m, th))
+    dF = float(_ref_dthetadot_sq(m, np.float64(th)))
+    return np.array(
+        [[0.0, -dF, 0.0, 2.0 * thd], [1.0, -dphi, 0.0, 0.0], [0.0, -ddphi * thd, 1.0, -dphi]]
+    )
+
+
+def _ref_impact_jacobian(m, nxt):
+    P, H = m.P, 1e-30
+    th = np.float64(m.theta_minus)
+    phi, dphi, _ = _ref_derivatives(m, th)
+    td = np.sqrt(_ref_speed(m, th))
+    xm = np.stack([phi, th + 0.0 * phi, dphi * td, td + 0.0 * phi], axis=-1)
+    grad = np.zeros(4)
+    for i, (a, b) in enumerate(((xm[0] + 1j * H, xm[1] + 0j), (xm[0] + 0j, xm[1] + 1j * H))):
+        fx, fy = model.swing_foot_position(P, a, b, 0.0, 0.0)
+        grad[i] = np.imag(fy - m.ground_slope * fx) / H
+    D = np.vstack([_ref_coords_jacobian(m, xm), grad])
+    dXs = np.linalg.solve(D, np.vstack([np.eye(3), np.zeros((1, 3))]))
+    xc = np.tile(xm.astype(complex)[:, None], (1, 4)) + 1j * H * np.eye(4)
+    dDelta = np.imag(np.array(model.impact(P, xc[0], xc[1], xc[2], xc[3]))) / H
+    xp = np.array(model.impact(P, *xm))
+    return _ref_coords_jacobian(nxt, xp) @ dDelta @ dXs, xm, grad
+
+
+def _same(got, want):
+    got, want = np.asarray(got), np.asarray(want)
+    return got.shape == want.shape and got.tobytes() == want.tobytes()
+
+
+def test_compiled_step_model_is_its_numpy_formulas_bit_for_bit():
+    """The step model's compiled kernels (speed profile, linearization, nominal state,
+    Jacobians, impact Jacobian) give what their formulas give on numpy arrays, to the last bit,
+    on random steps of both robots, on the gain grid and at points past the step's ends."""
+    rng = np.random.default_rng(11)
+    models = _models(rng, 24)
+    assert len(models) > 15 and models[-1].margin < 0.15
+    for m, nxt in zip(models, models[1:] + models[:1]):
+        margin, F_nodes = _ref_profile(m)
+        assert m.margin == margin
+        a, b = m._F.theta_a, m._F.theta_b
+        assert _same(m._F.coef, ChebyshevSeries(F_nodes, a, b).coef)
+        grid = np.linspace(m.theta_plus, m.theta_minus, 81)
+        for th in (grid, rng.uniform(a, b, 13), np.float64(rng.uniform(a, b))):
+            want = _ref_coefficients(m, np.atleast_1d(th))
+            assert all(_same(g, w) for g, w in zip(m.coefficients(th), want))
+            assert _same(m.dthetadot_sq(th), _ref_dthetadot_sq(m, th))
+            phi, dphi, _ = _ref_derivatives(m, th)
+            td = np.sqrt(_ref_speed(m, th))
+            state = np.stack([phi, th + 0.0 * phi, dphi * td, td + 0.0 * phi], axis=-1)
+            assert _same(m.nominal_state(th), state)
+        A, B, w = m.phase_matrices(grid)
+        a11, a12, a13, b1, td = _ref_coefficients(m, grid)
+        assert _same(w, 1.0 / td) and _same(A[:, 1, 2], 1.0 / td) and _same(B[:, 2, 0], 1.0 / td)
+        assert _same(A[:, 0], np.stack([a11 / td, a12 / td, a13 / td], axis=-1))
+        assert _same(B[:, 0, 0], b1 / td)
+        assert np.count_nonzero(A) == 4 * grid.size and np.count_nonzero(B) == 2 * grid.size
+        F, xm, grad = _ref_impact_jacobian(m, nxt)
+        assert _same(impact_jacobian(m, nxt), F)
+        assert _same(m.coords_jacobian(xm), _ref_coords_jacobian(m, xm))
+        assert _same(m.surface_gradient(xm[0], xm[1]), grad)
