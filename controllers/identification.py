@@ -209,7 +209,7 @@ def _slope(D, j, x0, x1, x2, x3):  # pragma: no cover - compiled
 
 @njit(cache=True)
 def _rk4_tangent(P, x, S, u, h, D):  # pragma: no cover - compiled
-    """One RK4 step of :func:`envs.physics.model.swing_rk4` (the same arithmetic: the same
+    """One RK4 step of :func:`envs.physics.model.swing_rk4` (its stages and update: the same
     state) from ``x`` (4,) under the input ``u``, and the step's exact derivative applied to
     the state's sensitivities ``S`` (11, 4), row ``j`` by unknown ``j`` of :func:`_slope`;
     both in place. ``D`` (4, 2, 11): work space."""
@@ -217,30 +217,27 @@ def _rk4_tangent(P, x, S, u, h, D):  # pragma: no cover - compiled
     h6 = h / 6.0
     q1, q2, q1d, q2d = x[0], x[1], x[2], x[3]
     q1dd, q2dd = model.accelerations(P, q1, q2, q1d, q2d, u)
+    s2, a2, b2, s3, a3, b3, s4, a4, b4 = model.swing_rk4_stages(
+        P, q1, q2, q1d, q2d, u, h, q1dd, q2dd
+    )
     _acceleration_partials(P, q1, q2, q1d, q2d, q1dd, q2dd, D[0])
-    w1_2, w2_2 = q1d + hh * q1dd, q2d + hh * q2dd
-    a2, b2 = model.accelerations(P, q1 + hh * q1d, q2 + hh * q2d, w1_2, w2_2, u)
-    _acceleration_partials(P, q1 + hh * q1d, q2 + hh * q2d, w1_2, w2_2, a2, b2, D[1])
-    w1_3, w2_3 = q1d + hh * a2, q2d + hh * b2
-    a3, b3 = model.accelerations(P, q1 + hh * w1_2, q2 + hh * w2_2, w1_3, w2_3, u)
-    _acceleration_partials(P, q1 + hh * w1_2, q2 + hh * w2_2, w1_3, w2_3, a3, b3, D[2])
-    w1_4, w2_4 = q1d + h * a3, q2d + h * b3
-    a4, b4 = model.accelerations(P, q1 + h * w1_3, q2 + h * w2_3, w1_4, w2_4, u)
-    _acceleration_partials(P, q1 + h * w1_3, q2 + h * w2_3, w1_4, w2_4, a4, b4, D[3])
-    x[0] = q1 + h6 * (q1d + 2.0 * w1_2 + 2.0 * w1_3 + w1_4)
-    x[1] = q2 + h6 * (q2d + 2.0 * w2_2 + 2.0 * w2_3 + w2_4)
-    x[2] = q1d + h6 * (q1dd + 2.0 * a2 + 2.0 * a3 + a4)
-    x[3] = q2d + h6 * (q2dd + 2.0 * b2 + 2.0 * b3 + b4)
+    _acceleration_partials(P, s2[0], s2[1], s2[2], s2[3], a2, b2, D[1])
+    _acceleration_partials(P, s3[0], s3[1], s3[2], s3[3], a3, b3, D[2])
+    _acceleration_partials(P, s4[0], s4[1], s4[2], s4[3], a4, b4, D[3])
+    x[0] = model.rk4_sum(q1, h6, q1d, s2[2], s3[2], s4[2])
+    x[1] = model.rk4_sum(q2, h6, q2d, s2[3], s3[3], s4[3])
+    x[2] = model.rk4_sum(q1d, h6, q1dd, a2, a3, a4)
+    x[3] = model.rk4_sum(q2d, h6, q2dd, b2, b3, b4)
     for j in range(S.shape[0]):
-        s0, s1, s2, s3 = S[j, 0], S[j, 1], S[j, 2], S[j, 3]
-        k0, k1, k2, k3 = _slope(D[0], j, s0, s1, s2, s3)
-        l0, l1, l2, l3 = _slope(D[1], j, s0 + hh * k0, s1 + hh * k1, s2 + hh * k2, s3 + hh * k3)
-        m0, m1, m2, m3 = _slope(D[2], j, s0 + hh * l0, s1 + hh * l1, s2 + hh * l2, s3 + hh * l3)
-        n0, n1, n2, n3 = _slope(D[3], j, s0 + h * m0, s1 + h * m1, s2 + h * m2, s3 + h * m3)
-        S[j, 0] = s0 + h6 * (k0 + 2.0 * l0 + 2.0 * m0 + n0)
-        S[j, 1] = s1 + h6 * (k1 + 2.0 * l1 + 2.0 * m1 + n1)
-        S[j, 2] = s2 + h6 * (k2 + 2.0 * l2 + 2.0 * m2 + n2)
-        S[j, 3] = s3 + h6 * (k3 + 2.0 * l3 + 2.0 * m3 + n3)
+        v0, v1, v2, v3 = S[j, 0], S[j, 1], S[j, 2], S[j, 3]
+        k0, k1, k2, k3 = _slope(D[0], j, v0, v1, v2, v3)
+        l0, l1, l2, l3 = _slope(D[1], j, v0 + hh * k0, v1 + hh * k1, v2 + hh * k2, v3 + hh * k3)
+        m0, m1, m2, m3 = _slope(D[2], j, v0 + hh * l0, v1 + hh * l1, v2 + hh * l2, v3 + hh * l3)
+        n0, n1, n2, n3 = _slope(D[3], j, v0 + h * m0, v1 + h * m1, v2 + h * m2, v3 + h * m3)
+        S[j, 0] = model.rk4_sum(v0, h6, k0, l0, m0, n0)
+        S[j, 1] = model.rk4_sum(v1, h6, k1, l1, m1, n1)
+        S[j, 2] = model.rk4_sum(v2, h6, k2, l2, m2, n2)
+        S[j, 3] = model.rk4_sum(v3, h6, k3, l3, m3, n3)
 
 
 @njit(cache=True)

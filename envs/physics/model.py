@@ -115,6 +115,29 @@ def accelerations(P, q1, q2, q1d, q2d, u):
 
 
 @_jit
+def rk4_sum(x, h6, k1, k2, k3, k4):
+    """The classical RK4 update of ``x`` from its four slopes ``k1 .. k4``, ``h6`` being a
+    sixth of the step: ``x + h6 (k1 + 2 k2 + 2 k3 + k4)``. Scalars only."""
+    return x + h6 * (k1 + 2.0 * k2 + 2.0 * k3 + k4)
+
+
+@_jit
+def swing_rk4_stages(P, q1, q2, q1d, q2d, u, h, q1dd, q2dd):
+    """The stages of one classical RK4 step of the swing phase (:func:`swing_rk4`): for each
+    of stages 2, 3 and 4 the state ``(q1, q2, q1d, q2d)`` [rad, rad/s] at which its slope is
+    taken and the accelerations there [rad/s^2], from the state whose accelerations
+    ``(q1dd, q2dd)`` are known. Scalars only."""
+    hh = 0.5 * h
+    s2 = (q1 + hh * q1d, q2 + hh * q2d, q1d + hh * q1dd, q2d + hh * q2dd)
+    a2, b2 = accelerations(P, s2[0], s2[1], s2[2], s2[3], u)
+    s3 = (q1 + hh * s2[2], q2 + hh * s2[3], q1d + hh * a2, q2d + hh * b2)
+    a3, b3 = accelerations(P, s3[0], s3[1], s3[2], s3[3], u)
+    s4 = (q1 + h * s3[2], q2 + h * s3[3], q1d + h * a3, q2d + h * b3)
+    a4, b4 = accelerations(P, s4[0], s4[1], s4[2], s4[3], u)
+    return s2, a2, b2, s3, a3, b3, s4, a4, b4
+
+
+@_jit
 def swing_rk4(P, q1, q2, q1d, q2d, u, h, q1dd, q2dd):
     """One classical RK4 step of the swing phase, of length ``h`` [s] under the held input
     ``u`` [input units], from the state ``(q1, q2)`` [rad], ``(q1d, q2d)`` [rad/s] whose
@@ -124,18 +147,13 @@ def swing_rk4(P, q1, q2, q1d, q2d, u, h, q1dd, q2dd):
     over it by the same quadrature [J]: net ``int tau q1d dt``, positive
     ``int max(tau q1d, 0) dt`` and absolute ``int |tau q1d| dt``, ``tau = P[PB] u`` [N m].
     """
-    hh = 0.5 * h
-    a2, b2 = accelerations(P, q1 + hh * q1d, q2 + hh * q2d, q1d + hh * q1dd, q2d + hh * q2dd, u)
-    w1_2, w2_2 = q1d + hh * q1dd, q2d + hh * q2dd
-    a3, b3 = accelerations(P, q1 + hh * w1_2, q2 + hh * w2_2, q1d + hh * a2, q2d + hh * b2, u)
-    w1_3, w2_3 = q1d + hh * a2, q2d + hh * b2
-    a4, b4 = accelerations(P, q1 + h * w1_3, q2 + h * w2_3, q1d + h * a3, q2d + h * b3, u)
-    w1_4, w2_4 = q1d + h * a3, q2d + h * b3
+    s2, a2, b2, s3, a3, b3, s4, a4, b4 = swing_rk4_stages(P, q1, q2, q1d, q2d, u, h, q1dd, q2dd)
+    w1_2, w2_2, w1_3, w2_3, w1_4, w2_4 = s2[2], s2[3], s3[2], s3[3], s4[2], s4[3]
     h6 = h / 6.0
-    nq1 = q1 + h6 * (q1d + 2.0 * w1_2 + 2.0 * w1_3 + w1_4)
-    nq2 = q2 + h6 * (q2d + 2.0 * w2_2 + 2.0 * w2_3 + w2_4)
-    nw1 = q1d + h6 * (q1dd + 2.0 * a2 + 2.0 * a3 + a4)
-    nw2 = q2d + h6 * (q2dd + 2.0 * b2 + 2.0 * b3 + b4)
+    nq1 = rk4_sum(q1, h6, q1d, w1_2, w1_3, w1_4)
+    nq2 = rk4_sum(q2, h6, q2d, w2_2, w2_3, w2_4)
+    nw1 = rk4_sum(q1d, h6, q1dd, a2, a3, a4)
+    nw2 = rk4_sum(q2d, h6, q2dd, b2, b3, b4)
     tau = torque_from_input(P, u)
     p1, p2, p3, p4 = tau * q1d, tau * w1_2, tau * w1_3, tau * w1_4
     wnet = h6 * (p1 + 2.0 * p2 + 2.0 * p3 + p4)

@@ -94,21 +94,30 @@ def test_acceleration_partials_are_the_models_derivatives():
             assert np.all(err < 1e-12), err
 
 
+def noisy_stances(seed: int, knock: bool = False) -> tuple[SwingIdentifier, np.random.Generator]:
+    """An identifier of the nominal robot (1 mrad encoders) given three 90-sample stances of the
+    robot ``ERRORS`` off, with 1 mrad noise drawn from ``default_rng(seed)`` (with ``knock``,
+    0.02 rad added mid-way through the second stance's ``q2``: no initial state explains it);
+    and that generator."""
+    P = nominal().perturbed(ERRORS).vector()
+    rng = np.random.default_rng(seed)
+    ident = SwingIdentifier(nominal(), DT, angle_sigma=1e-3)
+    starts = [[-0.5, -0.25, 2.0, 1.2], [-0.42, -0.2, 1.6, 0.9], [-0.48, -0.23, 2.4, 1.0]]
+    for i, x0 in enumerate(starts):
+        u = stance_inputs(90, i)
+        q = simulate_swing(P, np.array(x0), u, DT, 4) + rng.normal(0.0, 1e-3, (90, 2))
+        if knock and i == 1:
+            q[45:60, 1] += 0.02
+        ident.add_stance(q, u)
+    return ident, rng
+
+
 def test_jacobian_is_the_derivative_of_the_simulated_residuals():
     """The residuals are the simulated minus measured angles (bit for bit as
     :func:`simulate_swing` integrates them) and the sensitivities' Jacobian is their derivative:
     against central differences (Richardson-extrapolated) to 1e-8 of each column's largest
     entry, at a point away from the fit's start."""
-    nom = nominal()
-    P = nom.perturbed(ERRORS).vector()
-    rng = np.random.default_rng(0)
-    ident = SwingIdentifier(nom, DT, angle_sigma=1e-3)
-    starts = [[-0.5, -0.25, 2.0, 1.2], [-0.42, -0.2, 1.6, 0.9], [-0.48, -0.23, 2.4, 1.0]]
-    for i, x0 in enumerate(starts):
-        u = stance_inputs(90, i)
-        ident.add_stance(
-            simulate_swing(P, np.array(x0), u, DT, 4) + rng.normal(0, 1e-3, (90, 2)), u
-        )
+    ident, rng = noisy_stances(0)
     p0, scale, args = ident._problem(ident._short, [0, 1, 2, 4, 6, 7], ident._z, ident.prior)
     Pm, index, nom_c, free_index, ratio, prior, Q, U, bounds, dt, nsub, sig = args
     nf = free_index.size
@@ -389,17 +398,7 @@ def test_block_solver_reaches_scipys_huber_minimum_and_covariance():
     """The Schur-complement solver against scipy's dense trust-region solver on the same Huber
     cost, with encoder noise and one stance pushed mid-way (samples beyond the threshold); its
     coefficient covariance against the dense inverse of scipy's robust Gauss-Newton Hessian."""
-    nom = nominal()
-    P = nom.perturbed(ERRORS).vector()
-    rng = np.random.default_rng(4)
-    ident = SwingIdentifier(nom, DT, angle_sigma=1e-3)
-    starts = [[-0.5, -0.25, 2.0, 1.2], [-0.42, -0.2, 1.6, 0.9], [-0.48, -0.23, 2.4, 1.0]]
-    for i, x0 in enumerate(starts):
-        u = stance_inputs(90, i)
-        q = simulate_swing(P, np.array(x0), u, DT, 4) + rng.normal(0.0, 1e-3, (90, 2))
-        if i == 1:
-            q[45:60, 1] += 0.02  # a knock mid-segment: no initial state explains it
-        ident.add_stance(q, u)
+    ident, _ = noisy_stances(4, knock=True)
     which = list(range(len(ident.segments)))
     p0, scale, args = ident._problem(ident._short, which, ident._z, ident.prior)
     x, _, A, B, C = _fit_huber(p0, scale, args)
