@@ -110,7 +110,13 @@ from .fallbacks import (
     fallback_name,
     relaxation_item,
 )
-from .feedback import constraint_at, feedback_law, pack_scalars, thetadot_sq_at
+from .feedback import (
+    constraint_at,
+    control_tick,
+    feedback_law,
+    pack_scalars,
+    thetadot_sq_at,
+)
 from .gains import GainTable, HorizonSolution, horizon_gains, pd_gains, step_models
 from .numerics import one_blas_thread
 from .planner import (
@@ -458,6 +464,8 @@ class TransverseController:
         self.solution: HorizonSolution | None = None
         self.gain_table: GainTable | None = None
         self._law_args: tuple[np.ndarray, ...] = ()  # gain_table.kernel_args()
+        self._tick_args: tuple[np.ndarray, ...] = ()  # ... and the solution's Zinv
+        self._phase_range = (math.nan, math.nan)  # the solution's theta[0], theta[-1] [rad]
         self._hold: tuple[np.ndarray, ...] | None = None  # the posture hold's, without gains
         self._torque_gain = float(model.input_gain(self.P))  # hip torque per input unit [N m]
         self._plan_offset = 0
@@ -890,6 +898,9 @@ class TransverseController:
         )
         self.gain_table = table
         self._law_args = table.kernel_args()
+        # the tick's arguments (Z^-1 lies on the gain grid) and the planned phase range
+        self._tick_args = (*self._law_args, sol.Zinv)
+        self._phase_range = (float(sol.theta[0]), float(sol.theta[-1]))
         self._hold = None
         m0 = sol.steps[0]
         c = m0.constraint
@@ -919,37 +930,51 @@ class TransverseController:
         """Input ``u`` [input units] for the state ``(q, qd)``; records diagnostics."""
         x = self._x
         x[0], x[1], x[2], x[3] = q[0], q[1], qd[0], qd[1]
+        return self.control_state(x)
+
+    def control_state(self, x: np.ndarray) -> float:
+        """:meth:`control` for the state ``x = (q1, q2, q1d, q2d)`` [rad, rad/s] as one float64
+        array (read during the call, not kept)."""
         rec = self.records[-1] if self.records else None
         if self.gain_table is None:
             return self._without_gains(x, rec)
-        u, I, y, yd, _ = feedback_law(self.P, x, *self._law_args)
-        if rec is not None and self._leaves_tube(x[1], I, y, rec):
+        # x_perp goes into the step record's own array (a new record has a new one)
+        z = rec.xperp_end if rec is not None else np.empty(3)
+        u, I, y, yd, ref, V = control_tick(self.P, x, *self._tick_args, z)
+        if rec is not None and self._leaves_tube(x[1], I, y, ref, rec):
             rec.retargets += 1
             self._start_step(
-                q.copy(), qd.copy(), math.nan, first=False, new_step=False, within=True
+                x[:2].copy(), x[2:].copy(), math.nan, first=False, new_step=False, within=True
             )
             rec.reason = " | ".join(filter(None, ("left the plan's tube: replanned", rec.reason)))
             if self.gain_table is None:
                 return self._without_gains(x, rec)
-            u, I, y, yd, _ = feedback_law(self.P, x, *self._law_args)
-        if rec is not None:
-            z = np.array([I, y, yd])
-            V = self.solution.lyapunov(z, x[1])
-            if rec.ticks == 0:
-                rec.thetadot_start = x[3]
-                rec.xperp_start = z
-                rec.V_start = V
-            elif self.solution.theta[0] <= x[1] <= self.solution.theta[-1]:
-                # the Lyapunov argument holds on the planned phase range of the step
-                rec.V_increase = max(rec.V_increase, V - rec.V_end)
-            rec.thetadot_end = x[3]
-            rec.xperp_end = z
-            rec.V_end = V
-            rec.max_abs_y = max(rec.max_abs_y, abs(y))
-            rec.max_xperp_norm = max(rec.max_xperp_norm, math.sqrt(I * I + y * y + yd * yd))
-            rec.max_abs_u = max(rec.max_abs_u, abs(u))
-            rec.saturated += int(abs(u) >= self.robot.u_max)
-            rec.ticks += 1
+            u, I, y, yd, ref, V = control_tick(self.P, x, *self._tick_args, z)
+        if rec is None:
+            return u
+        theta, thetadot = x[1], x[3]
+        if rec.ticks == 0:
+            rec.thetadot_start = thetadot
+            rec.xperp_start = z.copy()
+            rec.V_start = V
+        elif self._phase_range[0] <= theta <= self._phase_range[1]:
+            # the Lyapunov argument holds on the planned phase range of the step
+            dV = V - rec.V_end
+            if dV > rec.V_increase:
+                rec.V_increase = dV
+        rec.thetadot_end = thetadot
+        rec.V_end = V
+        ay, au = abs(y), abs(u)
+        if ay > rec.max_abs_y:
+            rec.max_abs_y = ay
+        norm = math.sqrt(I * I + y * y + yd * yd)
+        if norm > rec.max_xperp_norm:
+            rec.max_xperp_norm = norm
+        if au > rec.max_abs_u:
+            rec.max_abs_u = au
+        if au >= self.robot.u_max:
+            rec.saturated += 1
+        rec.ticks += 1
         return u
 
     def _without_gains(self, x: np.ndarray, rec: StepRecord | None) -> float:
@@ -977,14 +1002,13 @@ class TransverseController:
         K = np.tile(np.array([0.0, -kp, -kd]), (2, 1))
         return tab, np.array([float(q1)]), np.zeros(2), np.zeros(2), K
 
-    def _leaves_tube(self, theta: float, I: float, y: float, rec: StepRecord) -> bool:
+    def _leaves_tube(self, theta: float, I: float, y: float, ref: float, rec: StepRecord) -> bool:
         """Whether the state has been outside the plan's tube (``ControllerConfig.tube_*``)
-        long enough, early enough in the step, for a replan within it."""
+        long enough, early enough in the step, for a replan within it (``ref``: the nominal
+        ``theta_dot^2`` at the phase ``theta`` [rad^2/s^2])."""
         cfg = self.config
         if not cfg.replan or rec.retargets >= cfg.tube_replans or self.solution is None:
             return False
-        tab, _, thetadot_sq, dthetadot_sq, _ = self._law_args
-        ref = thetadot_sq_at(tab, thetadot_sq, dthetadot_sq, theta)
         out = (cfg.tube_energy > 0 and abs(I) > cfg.tube_energy * max(ref, 1e-9)) or (
             cfg.tube_y > 0 and abs(y) > cfg.tube_y
         )

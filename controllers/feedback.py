@@ -29,6 +29,7 @@ from .reduced import output_acceleration
 
 __all__ = [
     "constraint_at",
+    "control_tick",
     "feedback_law",
     "friction_clip",
     "lyapunov_at",
@@ -150,11 +151,43 @@ def feedback_law(P, x, tab, pc, thetadot_sq, dthetadot_sq, K):
     Returns:
         ``(u, I, y, y_dot, v)``.
     """
+    u, I, y, yd, v, _ = _law(P, x, tab, pc, thetadot_sq, dthetadot_sq, K)
+    return u, I, y, yd, v
+
+
+@_jit
+def control_tick(P, x, tab, pc, thetadot_sq, dthetadot_sq, K, Zinv, z):
+    """The controller's tick in one call: :func:`feedback_law`'s input, the nominal
+    ``theta_dot^2`` at the state's phase (the plan's tube reads it) and the Lyapunov value.
+
+    Args:
+        P, x, tab, pc, thetadot_sq, dthetadot_sq, K: as for :func:`feedback_law`.
+        Zinv: the Lyapunov matrices ``Z^-1`` at the gain grid's nodes, ``(n + 1, 3, 3)``
+            (:func:`lyapunov_at`, on the grid of ``tab``'s gain phase and spacing).
+        z: ``(3,)`` array that receives ``x_perp = (I, y, y_dot)``.
+
+    Returns:
+        ``(u, I, y, y_dot, thetadot_sq_ref, V)``: :func:`feedback_law`'s ``u, I, y, y_dot``,
+        :func:`thetadot_sq_at` at ``x[1]`` [rad^2/s^2] and ``V = z' Z^-1(x[1]) z``.
+    """
+    u, I, y, yd, _, ref = _law(P, x, tab, pc, thetadot_sq, dthetadot_sq, K)
+    z[0] = I
+    z[1] = y
+    z[2] = yd
+    V = lyapunov_at(Zinv, tab[T_K0], tab[T_KD], I, y, yd, x[1])
+    return u, I, y, yd, ref, V
+
+
+@_jit
+def _law(P, x, tab, pc, thetadot_sq, dthetadot_sq, K):
+    """The feedback law (:func:`feedback_law`): ``(u, I, y, y_dot, v, thetadot_sq_ref)``, the
+    last the nominal ``theta_dot^2`` at the phase ``x[1]``."""
     q1, q2, q1d, q2d = x[0], x[1], x[2], x[3]
     ph, dph, ddph = constraint_at(tab, pc, q2)
     y = q1 - ph
     yd = q1d - dph * q2d
-    I = q2d * q2d - thetadot_sq_at(tab, thetadot_sq, dthetadot_sq, q2)
+    ref = thetadot_sq_at(tab, thetadot_sq, dthetadot_sq, q2)
+    I = q2d * q2d - ref
     nk = K.shape[0] - 1
     r = (q2 - tab[T_K0]) / tab[T_KD]
     if r <= 0.0:
@@ -183,7 +216,7 @@ def feedback_law(P, x, tab, pc, thetadot_sq, dthetadot_sq, K):
         u = -umax
     if not (u == u):
         u = 0.0
-    return u, I, y, yd, v
+    return u, I, y, yd, v, ref
 
 
 @_jit

@@ -56,6 +56,7 @@ _SUPPORT = 1e-12  # belief below this fraction of its peak counts as zero
 _RECENTRE = 0.01  # the grid follows the estimate once it is this far off [m]
 _BLUR_TRUNCATE = 5.0  # the odometry's blur is cut this many standard deviations out
 _NO_BLUR = np.ones(1)
+_CONTACT = np.zeros(1)  # the stance foot's contact point: offset 0, height 0 (a scan point)
 
 
 @dataclass(frozen=True)
@@ -132,6 +133,7 @@ class ScanLocaliser:
             )
         self.estimate = estimate
         self.offsets = np.asarray(offsets, dtype=np.float64).reshape(-1)
+        self._contact_offsets = np.concatenate((_CONTACT, self.offsets))  # the foot, then these
         self.scan_sigma = float(scan_sigma)
         self.scan_range = float(scan_range)
         self.odometry_error = float(odometry_error)
@@ -182,7 +184,10 @@ class ScanLocaliser:
     @property
     def sigma(self) -> float:
         """Standard deviation of the foot-x error [m] (at least the grid's resolution)."""
-        w = self.belief.sum(axis=0)
+        return self._sigma_of(self.belief.sum(axis=0))
+
+    def _sigma_of(self, w: np.ndarray) -> float:
+        """:attr:`sigma` of the belief whose marginal over the errors is ``w``."""
         m = float(w @ self.errors)
         return math.sqrt(max(float(w @ (self.errors - m) ** 2), self._du**2 / 12))
 
@@ -198,7 +203,8 @@ class ScanLocaliser:
         if blur > 0.05 and self.sigma < _MAX_SHIFT / 4:  # beyond that the scans cannot tell
             w = _gaussian_weights(blur, _BLUR_TRUNCATE)
         b = _shift_and_blur(self.belief, self.rates * L / self._du, w)
-        self.belief = b / b.sum()
+        b /= b.sum()
+        self.belief = b
         return self._recentre()
 
     def rescale(self, ratio: float) -> None:
@@ -245,17 +251,16 @@ class ScanLocaliser:
             raise ValueError(f"scan must have {self.offsets.size} heights, got {s.size}")
         if int(readings) != readings or readings < 1:
             raise ValueError(f"readings = {readings!r}; allowed: integer >= 1")
-        sig0 = self.sigma
-        sigma = math.hypot(self.scan_sigma / math.sqrt(readings), map_sigma)
         marginal = self.belief.sum(axis=0)
+        sig0 = self._sigma_of(marginal)
+        sigma = math.hypot(self.scan_sigma / math.sqrt(readings), map_sigma)
         support = np.flatnonzero(marginal > _SUPPORT * marginal.max())
         cols = slice(support[0], support[-1] + 1)
         d = self.errors[cols] + self._origin  # the shifts from x
         cost, b, n = self._match(x, d, s, sigma, height, known)
         if cost is None:
             return LocalisationResult(0.0, math.nan, sig0, sig0, n)
-        post = self.belief[:, cols] * np.exp(-(cost - cost.min()))[None, :]
-        self.belief[:, cols] = post
+        self.belief[:, cols] *= np.exp(-(cost - cost.min()))[None, :]
         self.belief /= self.belief.sum()
         shift = self._recentre()
         k = int(np.argmin(np.abs(d - shift)))
@@ -302,8 +307,8 @@ class ScanLocaliser:
         fewer than two points fall on the known map), the foot's height at each shift [m] and
         the points used."""
         # the contact: the ground under the foot is at the foot's height
-        off = np.r_[0.0, self.offsets]
-        s = np.r_[0.0, s]
+        off = self._contact_offsets
+        s = np.concatenate((_CONTACT, s))
         use = np.isfinite(s) & (np.abs(s) < self.scan_range)
         X = x + d[:, None] + off[None, use]
         ok = np.asarray(known(X), dtype=bool) if known is not None else np.ones(X.shape, bool)
@@ -314,7 +319,7 @@ class ScanLocaliser:
             return None, np.full(d.size, math.nan), n
         H = np.asarray(height(X[:, cols]), dtype=np.float64)
         R = H - s[use][cols][None, :]
-        b = np.median(R, axis=1)  # the stance foot's height at each shift
+        b = _row_medians(R)  # the stance foot's height at each shift
         z = (R - b[:, None]) / sigma
         return 0.5 * np.minimum(z * z, self.outlier**2).sum(axis=1), b, n
 
@@ -339,6 +344,34 @@ def _gaussian_weights(sigma: float, truncate: float) -> np.ndarray:
 
 
 @njit(cache=True)
+def _row_medians(R):  # pragma: no cover - compiled
+    """``np.median(R, axis=1)`` as numpy gives it: each row's middle value, the mean of its two
+    middle values for an even count (numpy's mean: ``(0 + a + b) / 2``, so a zero median is
+    +0), NaN where the row holds one."""
+    nr, n = R.shape
+    out = np.empty(nr)
+    row = np.empty(n)  # the row sorted (insertion: rows are short)
+    h = n // 2
+    for j in range(nr):
+        nan = False
+        for i in range(n):
+            v = R[j, i]
+            nan |= v != v
+            k = i
+            while k > 0 and row[k - 1] > v:
+                row[k] = row[k - 1]
+                k -= 1
+            row[k] = v
+        if nan:
+            out[j] = np.nan
+        elif n % 2:
+            out[j] = 0.0 + row[h]
+        else:
+            out[j] = (0.0 + row[h - 1] + row[h]) / 2
+    return out
+
+
+@njit(cache=True)
 def _shift_and_blur(p, a, w):  # pragma: no cover - compiled
     """Each row ``j`` of ``p`` moved by ``a[j]`` grid points (linear interpolation; mass moved
     off the grid is lost), then correlated with the symmetric weights ``w`` (odd length; zero
@@ -348,6 +381,7 @@ def _shift_and_blur(p, a, w):  # pragma: no cover - compiled
     r = (w.size - 1) // 2
     out = np.empty_like(p)
     line = np.zeros(n + 2 * r)  # one moved row with r zeros either side
+    acc = np.empty(n)  # a row's sums (an array of its own: the loops below vectorise)
     for j in range(nr):
         k = math.floor(-a[j])  # moved[i] = p[j, i - a[j]]
         f = -a[j] - k
@@ -356,11 +390,13 @@ def _shift_and_blur(p, a, w):  # pragma: no cover - compiled
             t0 = p[j, s] if 0 <= s < n else 0.0
             t1 = p[j, s + 1] if 0 <= s + 1 < n else 0.0
             line[r + i] = t0 * (1.0 - f) + t1 * f
-        acc = out[j]
         for i in range(n):
             acc[i] = line[r + i] * w[r]
         for d in range(r, 0, -1):  # the outermost pair first
             wd = w[r - d]
+            lo = line[r - d : r - d + n]
+            hi = line[r + d : r + d + n]
             for i in range(n):
-                acc[i] += (line[r + i - d] + line[r + i + d]) * wd
+                acc[i] += (lo[i] + hi[i]) * wd
+        out[j] = acc
     return out

@@ -371,7 +371,7 @@ class ReferencePolicy:
                 new_map = est.terrain
             self.controller.replan(x[:2].copy(), x[2:].copy(), terrain=new_map)
             self._note_fallback()
-        u = self.controller.control(x[:2], x[2:])
+        u = self.controller.control_state(x)
         if self.record_history:
             h = self.history
             h["t"].append(est.t)

@@ -13,6 +13,7 @@ from controllers.controller import (
     StepRecord,
     TransverseController,
 )
+from controllers.feedback import feedback_law
 from envs import simulate
 from envs.physics import model
 from envs.physics.simulator import Simulator
@@ -383,6 +384,46 @@ def test_replanning_starts_every_footstep_at_zero(terrain):
         assert r.V_end > 1e-6 and r.V_ratio > 1e6
         assert 0 < r.max_xperp_norm < 0.06
     assert ControllerConfig.for_mode("replan").mode == "replan"
+
+
+def test_a_tick_records_the_transverse_coordinates_and_lyapunov_value_of_its_state():
+    """control(q, qd) and control_state(x) give the same inputs and records; a record holds
+    the feedback law's x_perp and V = z' Z^-1 z of its first and last ticks (the start's values
+    kept as more ticks run), and the running maxima over the step."""
+    config = ControllerConfig.for_robot("paper", replan=False)
+    a, b = (TransverseController("paper", "flat", config) for _ in range(2))
+    gait = a.planner.periodic_gait()
+    for c in (a, b):
+        c.reset(gait.q, gait.qd)
+    st, sol = a.solution.steps[0], a.solution
+    thetas = np.linspace(st.theta_plus, st.theta_minus, 9)[:-1]
+    zs, V = [], []
+    for k, th in enumerate(thetas):
+        x = state_from_z(st, th, np.array([0.02, 0.01 * (-1) ** k, -0.05 + 0.01 * k]))
+        u, I, y, yd, _ = feedback_law(a.P, x, *a.gain_table.kernel_args())
+        assert a.control(x[:2].copy(), x[2:].copy()) == u
+        assert b.control_state(x.copy()) == u
+        zs.append([I, y, yd])
+        V.append(sol.lyapunov(np.array(zs[-1]), x[1]))
+        ra = a.records[-1]
+        assert ra.xperp_end.tolist() == zs[-1] and ra.V_end == V[-1]
+        assert ra.thetadot_end == x[3]
+    zs = np.array(zs)
+    assert ra.xperp_start.tolist() == zs[0].tolist() and ra.V_start == V[0]
+    assert ra.ticks == thetas.size
+    assert ra.V_increase == max(0.0, *np.diff(V))
+    assert ra.max_xperp_norm == max(math.sqrt(I * I + y * y + yd * yd) for I, y, yd in zs)
+    assert ra.max_abs_y == np.abs(zs[:, 1]).max()
+    rb = b.records[-1]
+    for f in ("xperp_start", "xperp_end"):
+        np.testing.assert_array_equal(getattr(ra, f), getattr(rb, f))
+    for f in ("V_start", "V_end", "V_increase", "max_abs_y", "max_xperp_norm", "max_abs_u"):
+        assert getattr(ra, f) == getattr(rb, f)
+    assert (ra.saturated, ra.thetadot_start, ra.thetadot_end) == (
+        rb.saturated,
+        rb.thetadot_start,
+        rb.thetadot_end,
+    )
 
 
 def test_step_record_certificate_values():

@@ -6,7 +6,14 @@ import numpy as np
 import pytest
 
 from controllers.controller import ControllerConfig, TransverseController
-from controllers.feedback import constraint_at, feedback_law, friction_clip, thetadot_sq_at
+from controllers.feedback import (
+    constraint_at,
+    control_tick,
+    feedback_law,
+    friction_clip,
+    lyapunov_at,
+    thetadot_sq_at,
+)
 from controllers.reduced import pfl_terms
 from envs.physics import model
 
@@ -38,6 +45,30 @@ def test_feedback_law_matches_partial_feedback_linearisation(loaded, state_from_
     table = dataclasses.replace(ctrl.gain_table, gains=1e6 * ctrl.gain_table.gains)
     ub = feedback_law(ctrl.P, x, *table.kernel_args())[0]
     assert abs(ub) == ctrl.robot.u_max
+
+
+def test_control_tick_gives_the_separate_calls_values_exactly(loaded):
+    """The controller's one-call tick: feedback_law's (u, I, y, y_dot), the nominal
+    theta_dot^2 at the state's phase and V = z' Z^-1 z on the gain grid, bit for bit, on random
+    states around the step (before, inside and past it), the friction clip on and off."""
+    ctrl = loaded
+    sol, g = ctrl.solution, ctrl.gain_table
+    st = sol.steps[0]
+    rng = np.random.default_rng(7)
+    for table in (g, dataclasses.replace(g, friction_limit=0.3, stance_slope=0.1)):
+        args = table.kernel_args()
+        tab, _, f, df, _ = args
+        for _ in range(200):
+            th = rng.uniform(st.theta_plus - 0.1, st.theta_minus + 0.1)
+            x = np.array([rng.normal(0, 0.3), th, rng.normal(0, 2.0), rng.normal(-1.5, 0.5)])
+            z = np.full(3, np.nan)
+            u, I, y, yd, ref, V = control_tick(ctrl.P, x, *args, sol.Zinv, z)
+            assert (u, I, y, yd) == feedback_law(ctrl.P, x, *args)[:4]
+            assert ref == thetadot_sq_at(tab, f, df, x[1])
+            assert V == sol.lyapunov(np.array([I, y, yd]), x[1])
+            th0, step = sol.theta[0], sol.theta[1] - sol.theta[0]
+            assert V == lyapunov_at(sol.Zinv, th0, step, I, y, yd, x[1])
+            assert z.tolist() == [I, y, yd]
 
 
 def test_constraint_and_speed_match_the_step_model_inside_the_step(loaded):
